@@ -1,0 +1,44 @@
+# Everything a fresh machine (Python 3.11, pip, Debian apt) needs to run the tests.
+VENV    ?= .venv
+PY      := $(VENV)/bin/python
+STAMP   := $(VENV)/.installed
+SYSDEPS := socat prometheus
+export PYTHONDONTWRITEBYTECODE := 1
+
+.PHONY: test lint bench demo venv sysdeps clean
+
+$(STAMP): pyproject.toml
+	python3 -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+# Debian packages the integration tests use: socat (serial ptys), prometheus/promtool.
+sysdeps:
+	@missing=""; \
+	command -v socat >/dev/null || missing="$$missing socat"; \
+	command -v promtool >/dev/null || missing="$$missing prometheus"; \
+	if [ -n "$$missing" ]; then \
+		echo "installing Debian packages:$$missing"; \
+		SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
+		$$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check gateway sim_device tests bench
+	$(VENV)/bin/ruff format --check gateway sim_device tests bench
+	$(VENV)/bin/mypy
+
+test: $(STAMP) sysdeps lint
+	$(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(PY) -m bench
+
+demo: $(STAMP)
+	$(VENV)/bin/tactile-gateway demo
+
+clean:
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache *.egg-info

@@ -1,0 +1,18 @@
+"""The ``tactile-gateway`` command line: thin wrappers that parse, build config, call the library."""
+
+from __future__ import annotations
+
+import click
+
+from .model_cmd import model
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="tactile-gateway")
+def main() -> None:
+    """Tactile-array gateway: Modbus in, drift-corrected forces out, Prometheus metrics."""
+
+
+main.add_command(model)
+
+__all__ = ["main"]

@@ -1,0 +1,539 @@
+"""The sensor model: forward resistance, creep state, and force inversion.
+
+Total resistance (paper eq. 10, 13, 17, extended by the named effects)::
+
+    R_core = T(temp) * R0 (1 - eps) exp(-gamma s0 eps) + k / sqrt(F) + R_series
+    R      = R_core || R_leak
+    eps    = F / (A E0(F)) + e_kv1 + e_kv2 - h * d
+
+with ``k / sqrt(F) = 2 R_con`` (eq. 12), Kelvin strains e_kv (eq. 14 in state form),
+and d in [-1, 1] the load-direction state of the hysteresis effect. State is passed in and
+returned (``ModelState``); nothing is hidden in the model object.
+
+Time stepping convention (shared by the forward model and the inversion, so a round trip
+is exact): at each sample the state is first *relaxed* over the elapsed time with the
+previous force held, the resistance is computed (or inverted) with that state, then the
+new force is *recorded* into the state (it becomes the held force; the hysteresis
+direction moves with the force change).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .effects import parse_effects
+from .params import ChannelParams, SensorParams
+from .physics import contact_coefficient_ohm_sqrt_n, interparticle_separation_m
+from .physics import tunneling_decay_per_m
+
+FloatArray = NDArray[np.float64]
+StatusArray = NDArray[np.int8]
+
+_NEWTON_TOL_LOG = 1e-13
+_NEWTON_MAX_ITER = 60
+_RECURRENCE_WINDOW = 65536  # bounds the rounding of the running sums
+_MIN_LOG_DECAY = -36.0  # exp(-36) ~ 2e-16: a smaller factor is zero in double precision
+
+
+class ForceStatus(enum.IntEnum):
+    """Per-sample outcome of an inversion."""
+
+    OK = 0
+    NO_CONTACT = 1  # resistance at or above R(force_min): reads 0 N
+    SATURATED = 2  # resistance at or below R(force_max): reads force_max
+    INVALID = 3  # NaN, zero, negative or infinite resistance: reads NaN, never exported
+
+
+@dataclass(frozen=True)
+class ModelState:
+    """Per-channel state carried between samples (arrays of shape (N,))."""
+
+    kv1_strain: FloatArray
+    kv2_strain: FloatArray
+    direction: FloatArray
+    last_force_n: FloatArray
+
+    @classmethod
+    def zeros(cls, n_channels: int) -> ModelState:
+        z = np.zeros(n_channels)
+        return cls(z, z.copy(), z.copy(), z.copy())
+
+    def select(self, index: ArrayLike) -> ModelState:
+        """The state of a subset of channels."""
+        idx = np.asarray(index)
+        return ModelState(
+            self.kv1_strain[idx], self.kv2_strain[idx], self.direction[idx], self.last_force_n[idx]
+        )
+
+
+@dataclass(frozen=True)
+class ResistanceBreakdown:
+    """Forward model output; every array has the shape of the force input."""
+
+    total_ohm: FloatArray
+    contact_ohm: FloatArray
+    polymer_ohm: FloatArray
+    strain: FloatArray
+
+
+@dataclass(frozen=True)
+class Inversion:
+    """Inverse model output: force estimates and their status codes (``ForceStatus``)."""
+
+    force_n: FloatArray
+    status: StatusArray
+
+
+class SensorModel:
+    """A model of N sensor channels: the tunneling baseline plus named effects."""
+
+    def __init__(
+        self,
+        effects: str | Iterable[str],
+        params: SensorParams | Sequence[SensorParams] | ChannelParams,
+    ) -> None:
+        self.effects: tuple[str, ...] = parse_effects(effects)
+        self.params = params if isinstance(params, ChannelParams) else ChannelParams.stack(params)
+        p = self.params
+        on = self.has
+        self._gamma_s0 = tunneling_decay_per_m(p.barrier_height_ev) * interparticle_separation_m(
+            p.particle_diameter_m, p.volume_fraction
+        )
+        k = contact_coefficient_ohm_sqrt_n(p.rho1_ohm_m, p.rho2_ohm_m, p.hardness_pa)
+        self._contact_k = k if on("contact") else np.zeros_like(k)
+        self._series = p.series_resistance_ohm if on("series_resistance") else np.zeros_like(k)
+        self._leak = p.leakage_resistance_ohm if on("leakage") else np.full_like(k, np.inf)
+        self._has_leak = bool(on("leakage") and np.isfinite(self._leak).any())
+        self._a_e0 = p.area_m2 * p.e0_pa
+        self._a_e0_slope = p.area_m2 * p.e0_slope_pa_per_n
+        self._hyst = p.hysteresis_strain if on("hysteresis") else np.zeros_like(k)
+
+    # ----------------------------------------------------------------- structure
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
+
+    @property
+    def n_channels(self) -> int:
+        return self.params.n_channels
+
+    def initial_state(self) -> ModelState:
+        """Unloaded, fully relaxed state."""
+        return ModelState.zeros(self.n_channels)
+
+    def gamma_s0(self) -> FloatArray:
+        """The exponent scale gamma * s0 of eq. 9 per channel (dimensionless)."""
+        return self._gamma_s0.copy()
+
+    # ------------------------------------------------------------------- forward
+    def instantaneous_strain(self, force_n: ArrayLike) -> FloatArray:
+        """Elastic strain F / (A E0(F)) of the instantaneous spring (eq. 15, first term)."""
+        f = np.maximum(np.asarray(force_n, dtype=np.float64), 0.0)
+        return np.asarray(f / (self._a_e0 + self._a_e0_slope * f))
+
+    def _state_strain(self, state: ModelState | None) -> FloatArray | float:
+        if state is None:
+            return 0.0
+        total: FloatArray | float = 0.0
+        if self.has("creep"):
+            total = total + state.kv1_strain
+        if self.has("creep2"):
+            total = total + state.kv2_strain
+        if self.has("hysteresis"):
+            total = total - self._hyst * state.direction
+        return total
+
+    def _temperature_factor(self, temperature_c: ArrayLike | None) -> FloatArray | float:
+        if temperature_c is None or not self.has("temperature"):
+            return 1.0
+        p = self.params
+        dt = np.asarray(temperature_c, dtype=np.float64) - p.reference_temperature_c
+        return np.asarray(np.exp(p.temperature_coeff_per_k * dt))
+
+    def _breakdown(self, force_n: ArrayLike, state_strain: ArrayLike, temp_factor: ArrayLike) -> ResistanceBreakdown:
+        f = np.asarray(force_n, dtype=np.float64)
+        strain = self.instantaneous_strain(f) + state_strain
+        polymer = (
+            np.asarray(temp_factor) * self.params.r0_ohm * (1.0 - strain) * np.exp(-self._gamma_s0 * strain)
+        )
+        with np.errstate(divide="ignore"):
+            contact = np.where(f > 0.0, self._contact_k / np.sqrt(np.where(f > 0.0, f, 1.0)), np.inf)
+        contact = np.where(self._contact_k > 0.0, contact, 0.0)
+        core = polymer + contact + self._series
+        total = _parallel(core, self._leak) if self._has_leak else core
+        shape = np.broadcast_shapes(f.shape, np.shape(total))
+        return ResistanceBreakdown(
+            total_ohm=np.broadcast_to(total, shape).astype(np.float64),
+            contact_ohm=np.broadcast_to(contact, shape).astype(np.float64),
+            polymer_ohm=np.broadcast_to(polymer, shape).astype(np.float64),
+            strain=np.broadcast_to(strain, shape).astype(np.float64),
+        )
+
+    def breakdown(
+        self,
+        force_n: ArrayLike,
+        state: ModelState | None = None,
+        temperature_c: ArrayLike | None = None,
+    ) -> ResistanceBreakdown:
+        """Resistance of each channel at ``force_n`` with the given creep state.
+
+        ``state=None`` is the relaxed, never-loaded state (the instantaneous response).
+        A force <= 0 with contact on gives an open contact: +inf (or R_leak with leakage).
+        """
+        return self._breakdown(force_n, self._state_strain(state), self._temperature_factor(temperature_c))
+
+    def resistance(
+        self,
+        force_n: ArrayLike,
+        state: ModelState | None = None,
+        temperature_c: ArrayLike | None = None,
+    ) -> FloatArray:
+        """Total resistance in ohm (see ``breakdown``)."""
+        return self.breakdown(force_n, state, temperature_c).total_ohm
+
+    def held_step(
+        self, force_n: ArrayLike, time_s: ArrayLike, temperature_c: ArrayLike | None = None
+    ) -> ResistanceBreakdown:
+        """Closed form (eq. 15-17): a force applied as a step at t = 0 and held to ``time_s``.
+
+        E0, E1 and mu1 are evaluated at the applied force, as the paper does.
+        """
+        f = np.maximum(np.asarray(force_n, dtype=np.float64), 0.0)
+        t = np.asarray(time_s, dtype=np.float64)
+        p = self.params
+        strain: FloatArray | float = 0.0
+        if self.has("creep"):
+            e1 = p.e1_pa + p.e1_slope_pa_per_n * f
+            mu1 = p.mu1_pa_s + p.mu1_slope_pa_s_per_n * f
+            strain = f / (p.area_m2 * e1) * (1.0 - np.exp(-e1 * t / mu1))
+        if self.has("creep2"):
+            strain = strain + f / (p.area_m2 * p.e2_pa) * (1.0 - np.exp(-p.e2_pa * t / p.mu2_pa_s))
+        if self.has("hysteresis"):
+            direction = np.where(t > 0.0, 1.0 - np.exp(-f / p.hysteresis_force_n), 0.0)
+            strain = strain - self._hyst * direction
+        return self._breakdown(f, strain, self._temperature_factor(temperature_c))
+
+    # --------------------------------------------------------------------- state
+    def _kelvin_log_decay(self, force_n: FloatArray, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """log of the per-step decay factors of both Kelvin elements, and kv1's target strain."""
+        p = self.params
+        f = np.maximum(force_n, 0.0)
+        e1 = p.e1_pa + p.e1_slope_pa_per_n * f
+        mu1 = p.mu1_pa_s + p.mu1_slope_pa_s_per_n * f
+        dt = np.asarray(dt_s, dtype=np.float64)
+        return np.asarray(-e1 * dt / mu1), np.asarray(f / (p.area_m2 * e1))
+
+    def relax(self, state: ModelState, dt_s: ArrayLike) -> ModelState:
+        """Advance the creep state over ``dt_s`` seconds with ``state.last_force_n`` held.
+
+        Exact for a constant force (eq. 14 in state form); E1 and mu1 at the held force.
+        """
+        p = self.params
+        f = np.maximum(state.last_force_n, 0.0)
+        kv1 = state.kv1_strain
+        if self.has("creep"):
+            log_a, target = self._kelvin_log_decay(f, dt_s)
+            kv1 = target + (kv1 - target) * np.exp(log_a)
+        kv2 = state.kv2_strain
+        if self.has("creep2"):
+            target2 = f / (p.area_m2 * p.e2_pa)
+            kv2 = target2 + (kv2 - target2) * np.exp(-p.e2_pa * np.asarray(dt_s) / p.mu2_pa_s)
+        return ModelState(np.asarray(kv1), np.asarray(kv2), state.direction, state.last_force_n)
+
+    def record(self, state: ModelState, force_n: ArrayLike) -> ModelState:
+        """Make ``force_n`` the held force; the hysteresis direction follows the change."""
+        f = np.maximum(np.asarray(force_n, dtype=np.float64), 0.0)
+        direction = state.direction
+        if self.has("hysteresis"):
+            change = f - state.last_force_n
+            a = np.exp(-np.abs(change) / self.params.hysteresis_force_n)
+            direction = np.sign(change) * (1.0 - a) + direction * a
+        return ModelState(state.kv1_strain, state.kv2_strain, np.asarray(direction), f)
+
+    def _state_series(
+        self, force_n: FloatArray, dt_s: FloatArray, state0: ModelState
+    ) -> tuple[FloatArray, ModelState]:
+        """Summed state strain before each sample for a known force series (T, N).
+
+        ``dt_s[k]`` is the time from sample k-1 to sample k (dt_s[0] from the state's time).
+        Every state variable obeys a linear recurrence x[k+1] = a[k] x[k] + b[k], solved
+        in vectorized chunks; the result equals stepping ``relax``/``record`` sample by sample.
+        """
+        n_t = force_n.shape[0]
+        held = np.vstack([state0.last_force_n[None, :], force_n[:-1]])  # force held before k
+        dt = np.broadcast_to(dt_s.reshape(-1, 1), force_n.shape)
+        total = np.zeros_like(force_n)
+        p = self.params
+        kv1_end, kv2_end, dir_end = state0.kv1_strain, state0.kv2_strain, state0.direction
+        if self.has("creep"):
+            log_a, target = self._kelvin_log_decay(held, dt)
+            kv1, kv1_end = _relax_series(log_a, target, state0.kv1_strain)
+            total += kv1
+        if self.has("creep2"):
+            log_a2 = np.broadcast_to(-p.e2_pa * dt / p.mu2_pa_s, force_n.shape)
+            kv2, kv2_end = _relax_series(log_a2, held / (p.area_m2 * p.e2_pa), state0.kv2_strain)
+            total += kv2
+        if self.has("hysteresis"):
+            # direction before sample k reflects force changes up to sample k-1
+            prev = np.vstack([state0.last_force_n[None, :], force_n])
+            change = np.diff(prev, axis=0)  # change[k] = F[k] - F[k-1]
+            log_a3 = -np.abs(change) / p.hysteresis_force_n
+            lagged = np.vstack([np.zeros((1, force_n.shape[1])), log_a3[:-1]])
+            targets = np.vstack([np.zeros((1, force_n.shape[1])), np.sign(change[:-1])])
+            d, _ = _relax_series(lagged, targets, state0.direction)
+            a_last = np.exp(log_a3[-1])
+            dir_end = np.sign(change[-1]) * (1.0 - a_last) + d[-1] * a_last
+            total -= self._hyst * d
+        last = force_n[-1] if n_t else state0.last_force_n
+        # kv ends are "before the last sample's relax"; the final state is after recording it
+        return total, ModelState(
+            np.asarray(kv1_end), np.asarray(kv2_end), np.asarray(dir_end), np.asarray(last)
+        )
+
+    def simulate(
+        self,
+        force_n: ArrayLike,
+        time_s: ArrayLike,
+        state0: ModelState | None = None,
+        temperature_c: ArrayLike | None = None,
+        t0_s: float | None = None,
+    ) -> tuple[ResistanceBreakdown, ModelState]:
+        """Forward model over a load history ``force_n`` of shape (T, N) at times (T,).
+
+        The state is relaxed from ``t0_s`` (default: the first sample time) to each sample.
+        Returns the per-sample breakdown and the state after the last sample.
+        """
+        f = np.maximum(np.atleast_2d(np.asarray(force_n, dtype=np.float64)), 0.0)
+        f = np.broadcast_to(f, (f.shape[0], self.n_channels)).copy()
+        t = np.asarray(time_s, dtype=np.float64).reshape(-1)
+        state0 = state0 or self.initial_state()
+        dt = np.diff(t, prepend=t[0] if t0_s is None else t0_s)
+        strain, final = self._state_series(f, dt, state0)
+        out = self._breakdown(f, strain, self._temperature_factor(temperature_c))
+        return out, final
+
+    # ------------------------------------------------------------------- inverse
+    def invert(
+        self,
+        resistance_ohm: ArrayLike,
+        state: ModelState | None = None,
+        temperature_c: ArrayLike | None = None,
+        guess_n: ArrayLike | None = None,
+    ) -> Inversion:
+        """Force that gives ``resistance_ohm`` with the given state (no state update).
+
+        Flags instead of raising: >= R(force_min) is NO_CONTACT (0 N), <= R(force_max) is
+        SATURATED (force_max), NaN/zero/negative/infinite is INVALID (NaN force).
+        """
+        strain = self._state_strain(state)
+        return self._invert(
+            np.asarray(resistance_ohm, dtype=np.float64), strain, self._temperature_factor(temperature_c), guess_n
+        )
+
+    def invert_static(self, resistance_ohm: ArrayLike, temperature_c: ArrayLike | None = None) -> Inversion:
+        """Naive inversion with no creep state: what a static lookup table reads."""
+        return self.invert(resistance_ohm, None, temperature_c)
+
+    def track(
+        self,
+        resistance_ohm: ArrayLike,
+        state: ModelState,
+        dt_s: ArrayLike,
+        temperature_c: ArrayLike | None = None,
+    ) -> tuple[Inversion, ModelState]:
+        """Drift-corrected inversion of one sample per channel.
+
+        Relax the state over ``dt_s`` with the previous force held, invert with it, then
+        record the new force (0 N for no contact; the previous force for invalid samples).
+        """
+        relaxed = self.relax(state, dt_s)
+        inv = self.invert(resistance_ohm, relaxed, temperature_c, guess_n=np.maximum(state.last_force_n, 0.0))
+        held = np.where(inv.status == ForceStatus.INVALID, relaxed.last_force_n, inv.force_n)
+        return inv, self.record(relaxed, held)
+
+    def track_series(
+        self,
+        resistance_ohm: ArrayLike,
+        time_s: ArrayLike,
+        state0: ModelState | None = None,
+        temperature_c: ArrayLike | None = None,
+        t0_s: float | None = None,
+        max_sweeps: int = 60,
+    ) -> tuple[Inversion, ModelState]:
+        """Drift-corrected inversion of a whole series (T, N) at once.
+
+        Equivalent to calling ``track`` sample by sample, but solved as a fixed point over
+        the whole series: invert all samples with a state history, recompute the state
+        history from the forces (vectorized linear recurrences), repeat until the forces
+        stop changing. Falls back to the sample-by-sample loop if that does not converge.
+        """
+        r = np.atleast_2d(np.asarray(resistance_ohm, dtype=np.float64))
+        r = np.broadcast_to(r, (r.shape[0], self.n_channels))
+        t = np.asarray(time_s, dtype=np.float64).reshape(-1)
+        state0 = state0 or self.initial_state()
+        dt = np.diff(t, prepend=t[0] if t0_s is None else t0_s)
+        temp = self._temperature_factor(temperature_c)
+        has_state = any(self.has(e) for e in ("creep", "creep2", "hysteresis"))
+        strain: FloatArray | float = self._state_strain(state0)
+        guess: FloatArray | None = None
+        inv = self._invert(r, strain, temp, None)
+        for _ in range(max_sweeps):
+            held = _hold_invalid(inv, state0.last_force_n)
+            state_strain, final = self._state_series(held, dt, state0)
+            if not has_state:
+                return inv, final
+            guess = inv.force_n
+            inv = self._invert(r, state_strain, temp, guess)
+            change = np.abs(np.nan_to_num(inv.force_n - guess))
+            if float(change.max(initial=0.0)) <= 1e-11 * max(1.0, float(np.nanmax(np.abs(guess), initial=0.0))):
+                held = _hold_invalid(inv, state0.last_force_n)
+                return inv, self._state_series(held, dt, state0)[1]
+        return self._track_loop(r, dt, state0, temperature_c)
+
+    def _track_loop(
+        self, r: FloatArray, dt: FloatArray, state: ModelState, temperature_c: ArrayLike | None
+    ) -> tuple[Inversion, ModelState]:
+        forces = np.empty_like(r)
+        status = np.empty(r.shape, dtype=np.int8)
+        temps = None if temperature_c is None else np.broadcast_to(np.asarray(temperature_c), r.shape)
+        for k in range(r.shape[0]):
+            inv, state = self.track(r[k], state, dt[k], None if temps is None else temps[k])
+            forces[k], status[k] = inv.force_n, inv.status
+        return Inversion(forces, status), state
+
+    def _invert(
+        self,
+        r_meas: FloatArray,
+        state_strain: ArrayLike,
+        temp_factor: ArrayLike,
+        guess_n: ArrayLike | None,
+    ) -> Inversion:
+        p = self.params
+        shape = np.broadcast_shapes(r_meas.shape, p.r0_ohm.shape, np.shape(state_strain))
+        r_meas = np.broadcast_to(r_meas, shape)
+        fmin = np.broadcast_to(p.force_min_n, shape)
+        fmax = np.broadcast_to(p.force_max_n, shape)
+        r_at_min = self._breakdown(fmin, state_strain, temp_factor).total_ohm
+        r_at_max = self._breakdown(fmax, state_strain, temp_factor).total_ohm
+        with np.errstate(invalid="ignore"):
+            invalid = ~np.isfinite(r_meas) | ~(r_meas > 0.0)
+            no_contact = ~invalid & (r_meas >= r_at_min)
+            saturated = ~invalid & ~no_contact & (r_meas <= r_at_max)
+        solve = ~(invalid | no_contact | saturated)
+        status = np.zeros(shape, dtype=np.int8)
+        status[no_contact] = ForceStatus.NO_CONTACT
+        status[saturated] = ForceStatus.SATURATED
+        status[invalid] = ForceStatus.INVALID
+        force = np.where(saturated, fmax, 0.0)
+        force = np.where(invalid, np.nan, force)
+        if solve.any():
+            target = np.log(np.where(solve, r_meas, r_at_min))
+            lo, hi = np.log(fmin), np.log(fmax)
+            if guess_n is None:
+                # straight line between the range ends in (ln F, ln R)
+                lr_min, lr_max = np.log(r_at_min), np.log(np.where(r_at_max > 0, r_at_max, 1e-300))
+                frac = np.clip((lr_min - target) / np.where(lr_min > lr_max, lr_min - lr_max, 1.0), 0.0, 1.0)
+                u = lo + frac * (hi - lo)
+            else:
+                g = np.broadcast_to(np.asarray(guess_n, dtype=np.float64), shape)
+                u = np.log(np.clip(np.where(np.isfinite(g), g, fmin), fmin, fmax))
+            u = self._newton(u, lo.copy(), hi.copy(), target, np.asarray(state_strain), temp_factor)
+            force = np.where(solve, np.exp(u), force)
+        return Inversion(np.asarray(force, dtype=np.float64), status)
+
+    def _newton(
+        self,
+        u: FloatArray,
+        lo: FloatArray,
+        hi: FloatArray,
+        target: FloatArray,
+        state_strain: FloatArray,
+        temp_factor: ArrayLike,
+    ) -> FloatArray:
+        """Safeguarded Newton on ln R(e^u) = target, with a bisection bracket [lo, hi]."""
+        gs0 = self._gamma_s0
+        a_e0, a_e0s = self._a_e0, self._a_e0_slope
+        r0 = np.asarray(temp_factor) * self.params.r0_ohm
+        k, rs, leak = self._contact_k, self._series, self._leak
+        for _ in range(_NEWTON_MAX_ITER):
+            f = np.exp(u)
+            den = a_e0 + a_e0s * f
+            eps = f / den + state_strain
+            ex = r0 * np.exp(-gs0 * eps)
+            rc = k / np.sqrt(f)
+            core = ex * (1.0 - eps) + rc + rs
+            dcore = ex * (-1.0 - gs0 * (1.0 - eps)) * a_e0 / (den * den) - 0.5 * rc / f
+            if self._has_leak:
+                share = leak / (core + leak)
+                total, dtotal = core * share, dcore * share * share
+            else:
+                total, dtotal = core, dcore
+            g = np.log(total) - target
+            slope = f * dtotal / total
+            np.copyto(lo, u, where=g > 0.0)
+            np.copyto(hi, u, where=g <= 0.0)
+            step = g / slope
+            new = u - step
+            outside = ~((new > lo) & (new < hi))
+            new = np.where(outside, 0.5 * (lo + hi), new)
+            done = float(np.max(np.abs(new - u), initial=0.0)) < _NEWTON_TOL_LOG
+            u = new
+            if done:
+                break
+        return u
+
+
+def _parallel(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """a || b for resistances where either may be +inf."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = a * b / (a + b)
+    out = np.where(np.isinf(a), b, out)
+    return np.asarray(np.where(np.isinf(b), a, out))
+
+
+def _hold_invalid(inv: Inversion, last_force_n: FloatArray) -> FloatArray:
+    """Forces used to advance the state: invalid samples hold the last valid force."""
+    f = inv.force_n
+    bad = inv.status == ForceStatus.INVALID
+    if not bad.any():
+        return f
+    n_t = f.shape[0]
+    idx = np.where(bad, -1, np.arange(n_t)[:, None])
+    idx = np.maximum.accumulate(idx, axis=0)
+    filled = np.take_along_axis(f, np.maximum(idx, 0), axis=0)
+    return np.asarray(np.where(idx < 0, last_force_n, filled))
+
+
+def _relax_series(
+    log_a: FloatArray, target: FloatArray, x0: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Solve x[k] = target[k] + (x[k-1] - target[k]) a[k] for k = 0..T-1 from x[-1] = x0.
+
+    Returns (x, x[T-1]). Vectorized in chunks in which the cumulative log decay stays
+    within the exponent range of a double; the sum is carried in scaled form.
+    """
+    n_t = log_a.shape[0]
+    out = np.empty(np.broadcast_shapes(log_a.shape, target.shape))
+    log_a = np.broadcast_to(np.maximum(log_a, _MIN_LOG_DECAY), out.shape)
+    target = np.broadcast_to(target, out.shape)
+    b = target * (-np.expm1(log_a))  # x[k] = a x[k-1] + (1 - a) target
+    x = np.asarray(x0, dtype=np.float64)
+    start = 0
+    while start < n_t:
+        window = min(n_t - start, _RECURRENCE_WINDOW)
+        cum = np.cumsum(log_a[start : start + window], axis=0)
+        over = np.nonzero(np.max(-cum, axis=tuple(range(1, cum.ndim))) > 600.0)[0]
+        chunk = max(1, int(over[0])) if over.size else window
+        seg = slice(start, start + chunk)
+        lc = cum[:chunk]
+        scaled = np.cumsum(b[seg] * np.exp(-lc), axis=0)
+        out[seg] = np.exp(lc) * (x + scaled)
+        x = out[start + chunk - 1]
+        start += chunk
+    return out, np.asarray(x)
