@@ -52,7 +52,9 @@ def plot_model_figures(model: SensorModel, out_dir: Path) -> list[Path]:
     t = np.linspace(0.0, 600.0, 301)
     fig, ax = plt.subplots(figsize=(6, 4))
     for f in (0.5, 1.0, 2.0, 5.0, 8.0):
-        ax.semilogy(t, single.held_step(np.full((t.size, 1), f), t[:, None]).total_ohm[:, 0], label=f"{f:g} N")
+        ax.semilogy(
+            t, single.held_step(np.full((t.size, 1), f), t[:, None]).total_ohm[:, 0], label=f"{f:g} N"
+        )
     ax.set(xlabel="time (s)", ylabel="resistance (Ω)", title="Fig. 9b: creep at held forces")
     ax.legend()
     fig.tight_layout()

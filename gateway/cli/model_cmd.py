@@ -9,8 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from ..model import EFFECT_NAMES, ForceStatus, ParameterError, SensorModel, SensorParams
-from ..model import UnknownEffectError
+from ..model import EFFECT_NAMES, ForceStatus, ParameterError, SensorModel, SensorParams, UnknownEffectError
 from .common import parse_assignments, parse_float_list
 
 
@@ -74,7 +73,8 @@ def eval_cmd(force_text: str, time_text: str, effects: str, params: tuple[str, .
     if as_json:
         click.echo(json.dumps(rows))
         return
-    click.echo(f"{'force_n':>9} {'time_s':>9} {'resistance_ohm':>15} {'contact_ohm':>12} {'polymer_ohm':>12} {'strain':>9}")
+    header = ("force_n", 9), ("time_s", 9), ("resistance_ohm", 15), ("contact_ohm", 12), ("polymer_ohm", 12)
+    click.echo(" ".join(f"{name:>{width}}" for name, width in header) + f" {'strain':>9}")
     for r in rows:
         click.echo(
             f"{r['force_n']:>9.4g} {r['time_s']:>9.4g} {r['resistance_ohm']:>15.6g} "

@@ -70,8 +70,6 @@ def parse_effects(names: str | Iterable[str]) -> tuple[str, ...]:
         if name not in EFFECT_NAMES:
             close = difflib.get_close_matches(name, EFFECT_NAMES, n=1, cutoff=0.4)
             hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise UnknownEffectError(
-                f"unknown effect {name!r}{hint} (valid: {', '.join(EFFECT_NAMES)})"
-            )
+            raise UnknownEffectError(f"unknown effect {name!r}{hint} (valid: {', '.join(EFFECT_NAMES)})")
         chosen.add(name)
     return tuple(n for n in EFFECT_NAMES if n in chosen)

@@ -28,8 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .effects import parse_effects
 from .params import ChannelParams, SensorParams
-from .physics import contact_coefficient_ohm_sqrt_n, interparticle_separation_m
-from .physics import tunneling_decay_per_m
+from .physics import contact_coefficient_ohm_sqrt_n, interparticle_separation_m, tunneling_decay_per_m
 
 FloatArray = NDArray[np.float64]
 StatusArray = NDArray[np.int8]
@@ -109,6 +108,8 @@ class SensorModel:
         self._series = p.series_resistance_ohm if on("series_resistance") else np.zeros_like(k)
         self._leak = p.leakage_resistance_ohm if on("leakage") else np.full_like(k, np.inf)
         self._has_leak = bool(on("leakage") and np.isfinite(self._leak).any())
+        # with an open contact at rest, +inf is the model's own reading of an unloaded sensor
+        self._open_at_rest = np.asarray((self._contact_k > 0.0) & np.isinf(self._leak))
         self._a_e0 = p.area_m2 * p.e0_pa
         self._a_e0_slope = p.area_m2 * p.e0_slope_pa_per_n
         self._hyst = p.hysteresis_strain if on("hysteresis") else np.zeros_like(k)
@@ -154,9 +155,11 @@ class SensorModel:
         dt = np.asarray(temperature_c, dtype=np.float64) - p.reference_temperature_c
         return np.asarray(np.exp(p.temperature_coeff_per_k * dt))
 
-    def _breakdown(self, force_n: ArrayLike, state_strain: ArrayLike, temp_factor: ArrayLike) -> ResistanceBreakdown:
+    def _breakdown(
+        self, force_n: ArrayLike, state_strain: ArrayLike, temp_factor: ArrayLike
+    ) -> ResistanceBreakdown:
         f = np.asarray(force_n, dtype=np.float64)
-        strain = self.instantaneous_strain(f) + state_strain
+        strain = self.instantaneous_strain(f) + np.asarray(state_strain, dtype=np.float64)
         polymer = (
             np.asarray(temp_factor) * self.params.r0_ohm * (1.0 - strain) * np.exp(-self._gamma_s0 * strain)
         )
@@ -327,11 +330,16 @@ class SensorModel:
         """Force that gives ``resistance_ohm`` with the given state (no state update).
 
         Flags instead of raising: >= R(force_min) is NO_CONTACT (0 N), <= R(force_max) is
-        SATURATED (force_max), NaN/zero/negative/infinite is INVALID (NaN force).
+        SATURATED (force_max), NaN/zero/negative/infinite is INVALID (NaN force). The one
+        exception is +inf on a model whose contact is open at rest (contact on, no leakage):
+        that is the model's own reading of an unloaded sensor, so it is NO_CONTACT.
         """
         strain = self._state_strain(state)
         return self._invert(
-            np.asarray(resistance_ohm, dtype=np.float64), strain, self._temperature_factor(temperature_c), guess_n
+            np.asarray(resistance_ohm, dtype=np.float64),
+            strain,
+            self._temperature_factor(temperature_c),
+            guess_n,
         )
 
     def invert_static(self, resistance_ohm: ArrayLike, temperature_c: ArrayLike | None = None) -> Inversion:
@@ -389,7 +397,9 @@ class SensorModel:
             guess = inv.force_n
             inv = self._invert(r, state_strain, temp, guess)
             change = np.abs(np.nan_to_num(inv.force_n - guess))
-            if float(change.max(initial=0.0)) <= 1e-11 * max(1.0, float(np.nanmax(np.abs(guess), initial=0.0))):
+            if float(change.max(initial=0.0)) <= 1e-11 * max(
+                1.0, float(np.nanmax(np.abs(guess), initial=0.0))
+            ):
                 held = _hold_invalid(inv, state0.last_force_n)
                 return inv, self._state_series(held, dt, state0)[1]
         return self._track_loop(r, dt, state0, temperature_c)
@@ -420,7 +430,8 @@ class SensorModel:
         r_at_min = self._breakdown(fmin, state_strain, temp_factor).total_ohm
         r_at_max = self._breakdown(fmax, state_strain, temp_factor).total_ohm
         with np.errstate(invalid="ignore"):
-            invalid = ~np.isfinite(r_meas) | ~(r_meas > 0.0)
+            open_contact = np.isposinf(r_meas) & self._open_at_rest
+            invalid = (~np.isfinite(r_meas) | ~(r_meas > 0.0)) & ~open_contact
             no_contact = ~invalid & (r_meas >= r_at_min)
             saturated = ~invalid & ~no_contact & (r_meas <= r_at_max)
         solve = ~(invalid | no_contact | saturated)
@@ -510,9 +521,7 @@ def _hold_invalid(inv: Inversion, last_force_n: FloatArray) -> FloatArray:
     return np.asarray(np.where(idx < 0, last_force_n, filled))
 
 
-def _relax_series(
-    log_a: FloatArray, target: FloatArray, x0: FloatArray
-) -> tuple[FloatArray, FloatArray]:
+def _relax_series(log_a: FloatArray, target: FloatArray, x0: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Solve x[k] = target[k] + (x[k-1] - target[k]) a[k] for k = 0..T-1 from x[-1] = x0.
 
     Returns (x, x[T-1]). Vectorized in chunks in which the cumulative log decay stays

@@ -124,14 +124,12 @@ class SensorParams:
             allowed = PARAMETER_RANGES[f.name]
             if not allowed.contains(float(value)):
                 raise ParameterError(
-                    f"parameter {f.name} = {value!r} is outside its allowed range "
-                    f"{allowed.describe()}"
+                    f"parameter {f.name} = {value!r} is outside its allowed range {allowed.describe()}"
                 )
             object.__setattr__(self, f.name, float(value))
         if self.force_min_n >= self.force_max_n:
             raise ParameterError(
-                f"force_min_n ({self.force_min_n:g} N) must be below force_max_n "
-                f"({self.force_max_n:g} N)"
+                f"force_min_n ({self.force_min_n:g} N) must be below force_max_n ({self.force_max_n:g} N)"
             )
 
     def with_overrides(self, overrides: Mapping[str, Any]) -> SensorParams:

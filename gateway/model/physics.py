@@ -19,18 +19,14 @@ def tunneling_decay_per_m(barrier_height_ev: ArrayLike) -> FloatArray:
     return np.asarray(4.0 * np.pi / constants.h * np.sqrt(2.0 * constants.m_e * phi_j))
 
 
-def interparticle_separation_m(
-    particle_diameter_m: ArrayLike, volume_fraction: ArrayLike
-) -> FloatArray:
+def interparticle_separation_m(particle_diameter_m: ArrayLike, volume_fraction: ArrayLike) -> FloatArray:
     """Eq. 8 (Wu): s0 = D [(pi / (6 phi))^(1/3) - 1], in metres."""
     d = np.asarray(particle_diameter_m, dtype=np.float64)
     phi = np.asarray(volume_fraction, dtype=np.float64)
     return np.asarray(d * (np.cbrt(np.pi / (6.0 * phi)) - 1.0))
 
 
-def polymer_resistance_ohm(
-    r0_ohm: ArrayLike, strain: ArrayLike, gamma_s0: ArrayLike
-) -> FloatArray:
+def polymer_resistance_ohm(r0_ohm: ArrayLike, strain: ArrayLike, gamma_s0: ArrayLike) -> FloatArray:
     """Eq. 9/16: R_pol = R0 (1 - eps) exp(-gamma s0 eps) for a compressive strain eps."""
     eps = np.asarray(strain, dtype=np.float64)
     return np.asarray(np.asarray(r0_ohm) * (1.0 - eps) * np.exp(-np.asarray(gamma_s0) * eps))
