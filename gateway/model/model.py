@@ -427,8 +427,9 @@ class SensorModel:
         r_meas = np.broadcast_to(r_meas, shape)
         fmin = np.broadcast_to(p.force_min_n, shape)
         fmax = np.broadcast_to(p.force_max_n, shape)
-        r_at_min = self._breakdown(fmin, state_strain, temp_factor).total_ohm
-        r_at_max = self._breakdown(fmax, state_strain, temp_factor).total_ohm
+        r0t = np.asarray(temp_factor) * p.r0_ohm
+        ends = self._total_ohm(np.stack([fmin, fmax]), np.asarray(state_strain), r0t)
+        r_at_min, r_at_max = ends[0], ends[1]
         with np.errstate(invalid="ignore"):
             open_contact = np.isposinf(r_meas) & self._open_at_rest
             invalid = (~np.isfinite(r_meas) | ~(r_meas > 0.0)) & ~open_contact
@@ -452,9 +453,18 @@ class SensorModel:
             else:
                 g = np.broadcast_to(np.asarray(guess_n, dtype=np.float64), shape)
                 u = np.log(np.clip(np.where(np.isfinite(g), g, fmin), fmin, fmax))
-            u = self._newton(u, lo.copy(), hi.copy(), target, np.asarray(state_strain), temp_factor)
+            u = self._newton(u, lo.copy(), hi.copy(), target, np.asarray(state_strain), r0t)
             force = np.where(solve, np.exp(u), force)
         return Inversion(np.asarray(force, dtype=np.float64), status)
+
+    def _total_ohm(self, force_n: FloatArray, state_strain: FloatArray, r0: FloatArray) -> FloatArray:
+        """Total resistance for forces > 0 (the lean path of ``_breakdown`` for the inversion)."""
+        eps = force_n / (self._a_e0 + self._a_e0_slope * force_n) + state_strain
+        core = r0 * (1.0 - eps) * np.exp(-self._gamma_s0 * eps) + self._contact_k / np.sqrt(force_n)
+        core = core + self._series
+        if self._has_leak:
+            return np.asarray(core * self._leak / (core + self._leak))
+        return np.asarray(core)
 
     def _newton(
         self,
@@ -463,12 +473,11 @@ class SensorModel:
         hi: FloatArray,
         target: FloatArray,
         state_strain: FloatArray,
-        temp_factor: ArrayLike,
+        r0: FloatArray,
     ) -> FloatArray:
         """Safeguarded Newton on ln R(e^u) = target, with a bisection bracket [lo, hi]."""
         gs0 = self._gamma_s0
         a_e0, a_e0s = self._a_e0, self._a_e0_slope
-        r0 = np.asarray(temp_factor) * self.params.r0_ohm
         k, rs, leak = self._contact_k, self._series, self._leak
         for _ in range(_NEWTON_MAX_ITER):
             f = np.exp(u)
@@ -489,7 +498,7 @@ class SensorModel:
             np.copyto(hi, u, where=g <= 0.0)
             step = g / slope
             new = u - step
-            outside = ~((new > lo) & (new < hi))
+            outside = ~((new >= lo) & (new <= hi))
             new = np.where(outside, 0.5 * (lo + hi), new)
             done = float(np.max(np.abs(new - u), initial=0.0)) < _NEWTON_TOL_LOG
             u = new
