@@ -39,7 +39,9 @@ def _brentq_track(model: SensorModel, r: np.ndarray, dt_s: float) -> np.ndarray:
             state = one.relax(state, dt_s if k else 0.0)
             target = r[k, ch]
 
-            def gap(f: float, state: ModelState = state, target: float = target) -> float:
+            def gap(
+                f: float, state: ModelState = state, target: float = target, one: SensorModel = one
+            ) -> float:
                 return float(one.resistance(np.array([f]), state)[0]) - target
 
             f = brentq(gap, p.force_min_n[ch], p.force_max_n[ch], xtol=1e-12, rtol=1e-12)
@@ -78,10 +80,12 @@ def main() -> None:
 
     print(f"drift-corrected inversion, {r.size:.0e} samples ({CHANNELS} channels x {SAMPLES_PER_CHANNEL}):")
     print(
-        f"  vectorized track_series : {bulk_s:8.3f} s  {1e9 * per_sample_bulk:9.1f} ns/sample  max error {bulk_error:.1e} N"
+        f"  vectorized track_series : {bulk_s:8.3f} s  {1e9 * per_sample_bulk:9.1f} ns/sample"
+        f"  max error {bulk_error:.1e} N"
     )
     print(
-        f"  brentq loop (on {sub.size} samples): {1e6 * per_sample_base:9.1f} us/sample  max error {base_error:.1e} N"
+        f"  brentq loop (on {sub.size} samples): {1e6 * per_sample_base:9.1f} us/sample"
+        f"  max error {base_error:.1e} N"
     )
     print(f"  ratio: {per_sample_base / per_sample_bulk:8.0f}x the brentq loop (goal >= 100x)")
 
