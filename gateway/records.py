@@ -1,0 +1,268 @@
+"""Measurement records (``shared/spec/measurement-records.md``): the strict reader and the writer.
+
+A record is a CSV file, UTF-8, comma separated, with ``# key: value`` metadata lines before
+one header row, in long format (one row per sample per channel). The reader is strict about
+what it needs (``time_s``, ``resistance_ohm``; ``force_n`` for fitting) and tolerant of what
+it does not (column order, unknown columns). Every problem is a ``RecordError`` naming the
+file, the line and the column; no row is ever dropped silently. Rows that are valid but
+unusable for a fit (open circuit, zero force) are kept, counted and reported.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .atomic import atomic_write_text
+from .errors import RecordError
+
+FloatArray = NDArray[np.float64]
+
+REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "resistance_ohm")
+KNOWN_COLUMNS: tuple[str, ...] = ("time_s", "channel", "resistance_ohm", "force_n", "temperature_c")
+DEFAULT_CHANNEL = "0"
+
+
+@dataclass(frozen=True)
+class ChannelRecord:
+    """The samples of one channel, in file order (time non-decreasing)."""
+
+    name: str
+    time_s: FloatArray
+    resistance_ohm: FloatArray
+    force_n: FloatArray | None
+    temperature_c: FloatArray | None
+    line: NDArray[np.int64]  # the source line of every sample, for messages
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.time_s.size)
+
+    def usable_for_fit(self) -> NDArray[np.bool_]:
+        """Rows a fit can use: finite resistance and a positive reference force."""
+        ok = np.isfinite(self.resistance_ohm)
+        if self.force_n is not None:
+            ok &= self.force_n > 0.0
+        return np.asarray(ok)
+
+    def unusable_counts(self) -> dict[str, int]:
+        """How many rows a fit cannot use, by reason."""
+        counts = {"open_circuit": int(np.count_nonzero(np.isinf(self.resistance_ohm)))}
+        if self.force_n is not None:
+            counts["zero_force"] = int(np.count_nonzero(self.force_n <= 0.0))
+        return counts
+
+
+@dataclass(frozen=True)
+class Record:
+    """A whole measurement record: metadata and channels (in order of first appearance)."""
+
+    path: Path | None
+    metadata: dict[str, str]
+    channels: dict[str, ChannelRecord]
+    extra_columns: tuple[str, ...] = field(default=())
+
+    def channel(self, name: str | None = None) -> ChannelRecord:
+        """One channel by name; ``None`` means the only channel (an error if there are several)."""
+        if name is None:
+            if len(self.channels) == 1:
+                return next(iter(self.channels.values()))
+            names = ", ".join(self.channels)
+            raise RecordError(
+                f"{self._where()}: the record has {len(self.channels)} channels ({names}); choose one"
+            )
+        if name not in self.channels:
+            import difflib
+
+            close = difflib.get_close_matches(name, list(self.channels), n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise RecordError(
+                f"{self._where()}: no channel {name!r}{hint} (channels: {', '.join(self.channels)})"
+            )
+        return self.channels[name]
+
+    def _where(self) -> str:
+        return str(self.path) if self.path else "<record>"
+
+
+def read_record(path: str | os.PathLike[str], require_force: bool = False) -> Record:
+    """Read and validate a record file (see the module docstring)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise RecordError(f"{p}: no such file") from None
+    except UnicodeDecodeError as exc:
+        raise RecordError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except OSError as exc:
+        raise RecordError(f"{p}: cannot read ({exc.strerror})") from None
+    return parse_record(text, p, require_force=require_force)
+
+
+def parse_record(text: str, path: Path | None = None, require_force: bool = False) -> Record:
+    """Parse record text; ``path`` is only used in messages."""
+    where = str(path) if path else "<record>"
+    lines = text.splitlines()
+    metadata: dict[str, str] = {}
+    header_index = None
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            key, sep, value = stripped[1:].partition(":")
+            if sep and key.strip():
+                metadata[key.strip()] = value.strip()
+            continue
+        header_index = i
+        break
+    if header_index is None:
+        raise RecordError(f"{where}: no header row (expected columns {', '.join(REQUIRED_COLUMNS)})")
+    header_line = header_index + 1
+    reader = csv.reader(io.StringIO("\n".join(lines[header_index:])))
+    header = [h.strip() for h in next(reader)]
+    seen: set[str] = set()
+    for col, name in enumerate(header, start=1):
+        if name in seen:
+            raise RecordError(f"{where}:{header_line}: column {col}: duplicate column {name!r}")
+        seen.add(name)
+    needed = [*REQUIRED_COLUMNS, *(("force_n",) if require_force else ())]
+    for name in needed:
+        if name not in header:
+            raise RecordError(
+                f"{where}:{header_line}: missing required column {name!r} (found: {', '.join(header)})"
+            )
+    index = {name: header.index(name) for name in KNOWN_COLUMNS if name in header}
+    extra = tuple(h for h in header if h not in KNOWN_COLUMNS)
+
+    columns: dict[str, dict[str, list[float]]] = {}
+    line_numbers: dict[str, list[int]] = {}
+    last_time: dict[str, tuple[float, int]] = {}
+    for offset, row in enumerate(reader, start=1):
+        line_no = header_line + offset
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise RecordError(f"{where}:{line_no}: {len(row)} fields, the header has {len(header)}")
+        channel = row[index["channel"]].strip() if "channel" in index else DEFAULT_CHANNEL
+        if not channel:
+            raise RecordError(
+                f"{where}:{line_no}: column {index['channel'] + 1} (channel): empty channel name"
+            )
+        values: dict[str, float] = {}
+        for name, col in index.items():
+            if name == "channel":
+                continue
+            values[name] = _number(row[col], where, line_no, col + 1, name)
+        t = values["time_s"]
+        if not math.isfinite(t):
+            raise RecordError(
+                f"{where}:{line_no}: column {index['time_s'] + 1} (time_s): {t} is not a finite time"
+            )
+        r = values["resistance_ohm"]
+        col_r = index["resistance_ohm"] + 1
+        if math.isnan(r) or r <= 0.0:
+            raise RecordError(
+                f"{where}:{line_no}: column {col_r} (resistance_ohm): {row[col_r - 1].strip()!r} must be > 0 "
+                "(inf for an open circuit)"
+            )
+        if "force_n" in values and not math.isfinite(values["force_n"]):
+            col = index["force_n"] + 1
+            raise RecordError(
+                f"{where}:{line_no}: column {col} (force_n): {row[col - 1].strip()!r} is not finite"
+            )
+        if "force_n" in values and values["force_n"] < 0.0:
+            col = index["force_n"] + 1
+            raise RecordError(f"{where}:{line_no}: column {col} (force_n): {values['force_n']} must be >= 0")
+        if "temperature_c" in values and not math.isfinite(values["temperature_c"]):
+            col = index["temperature_c"] + 1
+            raise RecordError(f"{where}:{line_no}: column {col} (temperature_c): not a finite temperature")
+        if channel in last_time and t < last_time[channel][0]:
+            prev_t, prev_line = last_time[channel]
+            raise RecordError(
+                f"{where}:{line_no}: column {index['time_s'] + 1} (time_s): time goes backwards in channel "
+                f"{channel!r} ({t} after {prev_t} on line {prev_line})"
+            )
+        last_time[channel] = (t, line_no)
+        store = columns.setdefault(channel, {name: [] for name in values})
+        for name, v in values.items():
+            store[name].append(v)
+        line_numbers.setdefault(channel, []).append(line_no)
+    if not columns:
+        raise RecordError(f"{where}: no data rows after the header on line {header_line}")
+    channels = {
+        name: ChannelRecord(
+            name=name,
+            time_s=np.array(data["time_s"]),
+            resistance_ohm=np.array(data["resistance_ohm"]),
+            force_n=np.array(data["force_n"]) if "force_n" in data else None,
+            temperature_c=np.array(data["temperature_c"]) if "temperature_c" in data else None,
+            line=np.array(line_numbers[name], dtype=np.int64),
+        )
+        for name, data in columns.items()
+    }
+    return Record(path=path, metadata=metadata, channels=channels, extra_columns=extra)
+
+
+def _number(text: str, where: str, line: int, col: int, name: str) -> float:
+    raw = text.strip()
+    try:
+        value = float(raw)
+    except ValueError:
+        raise RecordError(f"{where}:{line}: column {col} ({name}): {raw!r} is not a number") from None
+    if math.isnan(value):
+        raise RecordError(f"{where}:{line}: column {col} ({name}): NaN is not a value")
+    return value
+
+
+def format_record(
+    metadata: Mapping[str, str],
+    channels: Sequence[str],
+    time_s: Iterable[float],
+    resistance_ohm: Iterable[Sequence[float]],
+    force_n: Iterable[Sequence[float]] | None = None,
+    temperature_c: Iterable[Sequence[float]] | None = None,
+) -> str:
+    """Record text in long format from per-sample rows of per-channel values."""
+    out = io.StringIO()
+    for key, value in metadata.items():
+        out.write(f"# {key}: {value}\n")
+    cols = ["time_s", "channel", "resistance_ohm"]
+    if force_n is not None:
+        cols.append("force_n")
+    if temperature_c is not None:
+        cols.append("temperature_c")
+    out.write(",".join(cols) + "\n")
+    forces = iter(force_n) if force_n is not None else None
+    temps = iter(temperature_c) if temperature_c is not None else None
+    for t, rs in zip(time_s, resistance_ohm, strict=True):
+        fs = next(forces) if forces is not None else None
+        ts = next(temps) if temps is not None else None
+        for i, name in enumerate(channels):
+            fields = [repr(float(t)), name, _fmt(rs[i])]
+            if fs is not None:
+                fields.append(_fmt(fs[i]))
+            if ts is not None:
+                fields.append(_fmt(ts[i]))
+            out.write(",".join(fields) + "\n")
+    return out.getvalue()
+
+
+def _fmt(value: float) -> str:
+    v = float(value)
+    if math.isinf(v):
+        return "inf" if v > 0 else "-inf"
+    return repr(v)
+
+
+def write_record(path: str | os.PathLike[str], text: str) -> None:
+    """Write record text atomically (a reader never sees half a file)."""
+    atomic_write_text(Path(path), text)

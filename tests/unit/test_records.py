@@ -1,0 +1,127 @@
+"""The strict record reader: every malformed file names file, line and column."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gateway.errors import RecordError
+from gateway.records import format_record, parse_record, read_record, write_record
+
+GOOD = """# sensor: linqstat-7
+# source: bench 2
+time_s,channel,resistance_ohm,force_n,temperature_c,comment
+0.0,a,1.5e5,0.0,25.0,start
+0.0,b,inf,0.0,25.0,
+0.5,a,9.9e4,1.0,25.1,x
+0.5,b,1.2e5,0.5,25.1,
+1.0,a,9.8e4,1.0,25.2,
+"""
+
+
+def test_good_record_is_read_with_metadata_and_channels(tmp_path: Path) -> None:
+    path = tmp_path / "r.csv"
+    path.write_text(GOOD)
+    rec = read_record(path, require_force=True)
+    assert rec.metadata == {"sensor": "linqstat-7", "source": "bench 2"}
+    assert list(rec.channels) == ["a", "b"]
+    assert rec.extra_columns == ("comment",)
+    a = rec.channel("a")
+    np.testing.assert_array_equal(a.time_s, [0.0, 0.5, 1.0])
+    np.testing.assert_array_equal(a.resistance_ohm, [1.5e5, 9.9e4, 9.8e4])
+    assert a.line.tolist() == [4, 6, 8]
+    b = rec.channel("b")
+    assert math.isinf(b.resistance_ohm[0])
+    assert b.unusable_counts() == {"open_circuit": 1, "zero_force": 1}
+    assert b.usable_for_fit().tolist() == [False, True]
+
+
+def test_column_order_is_free_and_channel_is_optional() -> None:
+    rec = parse_record("resistance_ohm,time_s\n100,0\n90,1\n")
+    ch = rec.channel()
+    assert ch.name == "0"
+    assert ch.force_n is None and ch.temperature_c is None
+    np.testing.assert_array_equal(ch.resistance_ohm, [100.0, 90.0])
+
+
+BAD = [
+    ("", "no header row"),
+    ("# only: metadata\n", "no header row"),
+    ("time_s,force_n\n0,1\n", "r.csv:1: missing required column 'resistance_ohm'"),
+    ("resistance_ohm,force_n\n1,1\n", "r.csv:1: missing required column 'time_s'"),
+    ("time_s,resistance_ohm\n", "no data rows after the header on line 1"),
+    ("time_s,resistance_ohm,time_s\n0,1,0\n", "r.csv:1: column 3: duplicate column 'time_s'"),
+    ("time_s,resistance_ohm\n0,abc\n", "r.csv:2: column 2 (resistance_ohm): 'abc' is not a number"),
+    ("time_s,resistance_ohm\nzero,1\n", "r.csv:2: column 1 (time_s): 'zero' is not a number"),
+    ("time_s,resistance_ohm\n0,-5\n", "r.csv:2: column 2 (resistance_ohm): '-5' must be > 0"),
+    ("time_s,resistance_ohm\n0,0\n", "r.csv:2: column 2 (resistance_ohm): '0' must be > 0"),
+    ("time_s,resistance_ohm\n0,nan\n", "r.csv:2: column 2 (resistance_ohm): NaN is not a value"),
+    ("time_s,resistance_ohm\n0,1\n1,1,3\n", "r.csv:3: 3 fields, the header has 2"),
+    (
+        "# a: b\ntime_s,resistance_ohm\n1,1\n0.5,1\n",
+        "r.csv:4: column 1 (time_s): time goes backwards in channel '0'",
+    ),
+    ("time_s,resistance_ohm\ninf,1\n", "r.csv:2: column 1 (time_s): inf is not a finite time"),
+    ("time_s,resistance_ohm,force_n\n0,1,-1\n", "r.csv:2: column 3 (force_n): -1.0 must be >= 0"),
+    ("time_s,resistance_ohm,force_n\n0,1,inf\n", "r.csv:2: column 3 (force_n): 'inf' is not finite"),
+    ("time_s,channel,resistance_ohm\n0,,1\n", "r.csv:2: column 2 (channel): empty channel name"),
+    (
+        "time_s,resistance_ohm,temperature_c\n0,1,inf\n",
+        "r.csv:2: column 3 (temperature_c): not a finite temperature",
+    ),
+]
+
+
+@pytest.mark.parametrize(("text", "message"), BAD)
+def test_malformed_records_name_file_line_and_column(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "r.csv"
+    path.write_text(text)
+    with pytest.raises(RecordError) as info:
+        read_record(path)
+    assert message in str(info.value)
+    assert str(path) in str(info.value)
+
+
+def test_fitting_needs_force(tmp_path: Path) -> None:
+    path = tmp_path / "r.csv"
+    path.write_text("time_s,resistance_ohm\n0,1\n")
+    with pytest.raises(RecordError, match="missing required column 'force_n'"):
+        read_record(path, require_force=True)
+
+
+def test_missing_and_undecodable_files(tmp_path: Path) -> None:
+    with pytest.raises(RecordError, match="no such file"):
+        read_record(tmp_path / "absent.csv")
+    bad = tmp_path / "latin1.csv"
+    bad.write_bytes("time_s,resistance_ohm\n0,1\n# caf\xe9\n".encode("latin-1"))
+    with pytest.raises(RecordError, match="not UTF-8"):
+        read_record(bad)
+
+
+def test_channel_lookup_suggests() -> None:
+    rec = parse_record(GOOD)
+    with pytest.raises(RecordError, match="no channel 'aa'; did you mean 'a'"):
+        rec.channel("aa")
+    with pytest.raises(RecordError, match="the record has 2 channels"):
+        rec.channel()
+
+
+def test_write_then_read_round_trip(tmp_path: Path) -> None:
+    text = format_record(
+        {"sensor": "sim"},
+        ["c0", "c1"],
+        [0.0, 0.1],
+        [[1e5, math.inf], [9e4, 8e4]],
+        force_n=[[0.5, 0.0], [1.0, 2.0]],
+        temperature_c=[[25.0, 25.0], [25.5, 25.5]],
+    )
+    path = tmp_path / "out.csv"
+    write_record(path, text)
+    rec = read_record(path, require_force=True)
+    assert rec.metadata == {"sensor": "sim"}
+    assert math.isinf(rec.channel("c1").resistance_ohm[0])
+    np.testing.assert_array_equal(rec.channel("c1").force_n, [0.0, 2.0])
+    assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]
