@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from .calibrate_cmd import calibrate_cmd
+from .config_cmd import channels, check_config
 from .model_cmd import model
 
 
@@ -14,5 +16,8 @@ def main() -> None:
 
 
 main.add_command(model)
+main.add_command(check_config)
+main.add_command(channels)
+main.add_command(calibrate_cmd)
 
 __all__ = ["main"]

@@ -7,14 +7,17 @@ Total resistance (paper eq. 10, 13, 17, extended by the named effects)::
     eps    = F / (A E0(F)) + e_kv1 + e_kv2 - h * d
 
 with ``k / sqrt(F) = 2 R_con`` (eq. 12), Kelvin strains e_kv (eq. 14 in state form),
-and d in [-1, 1] the load-direction state of the hysteresis effect. State is passed in and
-returned (``ModelState``); nothing is hidden in the model object.
+and d in [-1, 1] the load direction of the hysteresis effect: +1 after loading, -1 after
+unloading. d follows the force through a narrow play (backlash) operator, p <- clip(p, F - w,
+F + w) with w = 0.1 F_h, so that noise does not wander it, and then approaches the sign of
+each play move exponentially in the force travelled (a Duhem / Bouc-Wen form):
+d <- sign(dp) + (d - sign(dp)) exp(-|dp| / F_h), F_h = ``hysteresis_force_n``. State is passed in and returned (``ModelState``); nothing is hidden in
+the model object.
 
 Time stepping convention (shared by the forward model and the inversion, so a round trip
 is exact): at each sample the state is first *relaxed* over the elapsed time with the
 previous force held, the resistance is computed (or inverted) with that state, then the
-new force is *recorded* into the state (it becomes the held force; the hysteresis
-direction moves with the force change).
+new force is *recorded* into the state (it becomes the held force and moves the play).
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ StatusArray = NDArray[np.int8]
 
 _NEWTON_TOL_LOG = 1e-13
 _NEWTON_MAX_ITER = 60
+#: Dead band of the hysteresis play operator, as a fraction of ``hysteresis_force_n``.
+HYSTERESIS_DEAD_BAND = 0.1
 _RECURRENCE_WINDOW = 65536  # bounds the rounding of the running sums
 _MIN_LOG_DECAY = -36.0  # exp(-36) ~ 2e-16: a smaller factor is zero in double precision
 
@@ -54,19 +59,24 @@ class ModelState:
 
     kv1_strain: FloatArray
     kv2_strain: FloatArray
-    direction: FloatArray
+    play_n: FloatArray  # hysteresis dead-band play output, N
+    direction: FloatArray  # hysteresis load direction in [-1, 1]
     last_force_n: FloatArray
 
     @classmethod
     def zeros(cls, n_channels: int) -> ModelState:
         z = np.zeros(n_channels)
-        return cls(z, z.copy(), z.copy(), z.copy())
+        return cls(z, z.copy(), z.copy(), z.copy(), z.copy())
 
     def select(self, index: ArrayLike) -> ModelState:
         """The state of a subset of channels."""
         idx = np.asarray(index)
         return ModelState(
-            self.kv1_strain[idx], self.kv2_strain[idx], self.direction[idx], self.last_force_n[idx]
+            self.kv1_strain[idx],
+            self.kv2_strain[idx],
+            self.play_n[idx],
+            self.direction[idx],
+            self.last_force_n[idx],
         )
 
 
@@ -216,7 +226,9 @@ class SensorModel:
         if self.has("creep2"):
             strain = strain + f / (p.area_m2 * p.e2_pa) * (1.0 - np.exp(-p.e2_pa * t / p.mu2_pa_s))
         if self.has("hysteresis"):
-            direction = np.where(t > 0.0, 1.0 - np.exp(-f / p.hysteresis_force_n), 0.0)
+            # recorded from rest: the play moves by max(0, F - w)
+            travel = np.maximum(f - HYSTERESIS_DEAD_BAND * p.hysteresis_force_n, 0.0)
+            direction = np.where(t > 0.0, -np.expm1(-travel / p.hysteresis_force_n), 0.0)
             strain = strain - self._hyst * direction
         return self._breakdown(f, strain, self._temperature_factor(temperature_c))
 
@@ -245,17 +257,21 @@ class SensorModel:
         if self.has("creep2"):
             target2 = f / (p.area_m2 * p.e2_pa)
             kv2 = target2 + (kv2 - target2) * np.exp(-p.e2_pa * np.asarray(dt_s) / p.mu2_pa_s)
-        return ModelState(np.asarray(kv1), np.asarray(kv2), state.direction, state.last_force_n)
+        return ModelState(np.asarray(kv1), np.asarray(kv2), state.play_n, state.direction, state.last_force_n)
 
     def record(self, state: ModelState, force_n: ArrayLike) -> ModelState:
-        """Make ``force_n`` the held force; the hysteresis direction follows the change."""
+        """Make ``force_n`` the held force and move the hysteresis direction with it."""
         f = np.maximum(np.asarray(force_n, dtype=np.float64), 0.0)
-        direction = state.direction
+        play, direction = state.play_n, state.direction
         if self.has("hysteresis"):
-            change = f - state.last_force_n
-            a = np.exp(-np.abs(change) / self.params.hysteresis_force_n)
-            direction = np.sign(change) * (1.0 - a) + direction * a
-        return ModelState(state.kv1_strain, state.kv2_strain, np.asarray(direction), f)
+            f_h = self.params.hysteresis_force_n
+            w = HYSTERESIS_DEAD_BAND * f_h
+            new_play = np.clip(play, f - w, f + w)
+            move = new_play - play
+            a = np.exp(-np.abs(move) / f_h)
+            direction = np.sign(move) * (1.0 - a) + direction * a
+            play = new_play
+        return ModelState(state.kv1_strain, state.kv2_strain, np.asarray(play), np.asarray(direction), f)
 
     def _state_series(
         self, force_n: FloatArray, dt_s: FloatArray, state0: ModelState
@@ -271,7 +287,8 @@ class SensorModel:
         dt = np.broadcast_to(dt_s.reshape(-1, 1), force_n.shape)
         total = np.zeros_like(force_n)
         p = self.params
-        kv1_end, kv2_end, dir_end = state0.kv1_strain, state0.kv2_strain, state0.direction
+        kv1_end, kv2_end = state0.kv1_strain, state0.kv2_strain
+        play_end, dir_end = state0.play_n, state0.direction
         if self.has("creep"):
             log_a, target = self._kelvin_log_decay(held, dt)
             kv1, kv1_end = _relax_series(log_a, target, state0.kv1_strain)
@@ -281,20 +298,21 @@ class SensorModel:
             kv2, kv2_end = _relax_series(log_a2, held / (p.area_m2 * p.e2_pa), state0.kv2_strain)
             total += kv2
         if self.has("hysteresis"):
-            # direction before sample k reflects force changes up to sample k-1
-            prev = np.vstack([state0.last_force_n[None, :], force_n])
-            change = np.diff(prev, axis=0)  # change[k] = F[k] - F[k-1]
-            log_a3 = -np.abs(change) / p.hysteresis_force_n
-            lagged = np.vstack([np.zeros((1, force_n.shape[1])), log_a3[:-1]])
-            targets = np.vstack([np.zeros((1, force_n.shape[1])), np.sign(change[:-1])])
-            d, _ = _relax_series(lagged, targets, state0.direction)
-            a_last = np.exp(log_a3[-1])
-            dir_end = np.sign(change[-1]) * (1.0 - a_last) + d[-1] * a_last
-            total -= self._hyst * d
+            f_h = p.hysteresis_force_n
+            play = _play_series(force_n, HYSTERESIS_DEAD_BAND * f_h, state0.play_n)  # after recording F[k]
+            move = np.diff(np.vstack([state0.play_n[None, :], play]), axis=0)
+            after, _ = _relax_series(-np.abs(move) / f_h, np.sign(move), state0.direction)
+            before = np.vstack([state0.direction[None, :], after[:-1]])
+            total -= self._hyst * before
+            play_end, dir_end = play[-1], after[-1]
         last = force_n[-1] if n_t else state0.last_force_n
         # kv ends are "before the last sample's relax"; the final state is after recording it
         return total, ModelState(
-            np.asarray(kv1_end), np.asarray(kv2_end), np.asarray(dir_end), np.asarray(last)
+            np.asarray(kv1_end),
+            np.asarray(kv2_end),
+            np.asarray(play_end),
+            np.asarray(dir_end),
+            np.asarray(last),
         )
 
     def simulate(
@@ -528,6 +546,24 @@ def _hold_invalid(inv: Inversion, last_force_n: FloatArray) -> FloatArray:
     idx = np.maximum.accumulate(idx, axis=0)
     filled = np.take_along_axis(f, np.maximum(idx, 0), axis=0)
     return np.asarray(np.where(idx < 0, last_force_n, filled))
+
+
+def _play_series(force_n: FloatArray, radius_n: FloatArray, p0_n: FloatArray) -> FloatArray:
+    """Play operator over a series, p[k] = clip(p[k-1], F[k] - r, F[k] + r), shape (T, N).
+
+    Each step is a clamp, and clamps compose into clamps:
+    clip(clip(x, a1, b1), a2, b2) = clip(x, clip(a1, a2, b2), clip(b1, a2, b2)); an inclusive
+    prefix scan over the clamp bounds (log2 T vectorized passes) gives every p[k] exactly.
+    """
+    lo = force_n - radius_n
+    hi = force_n + radius_n
+    shift = 1
+    while shift < force_n.shape[0]:
+        lo_new = np.clip(lo[:-shift], lo[shift:], hi[shift:])
+        hi_new = np.clip(hi[:-shift], lo[shift:], hi[shift:])
+        lo[shift:], hi[shift:] = lo_new, hi_new
+        shift *= 2
+    return np.asarray(np.clip(p0_n, lo, hi))
 
 
 def _relax_series(log_a: FloatArray, target: FloatArray, x0: FloatArray) -> tuple[FloatArray, FloatArray]:
