@@ -77,6 +77,7 @@ class FitResult:
     n_parameters: int
     fixed_reasons: dict[str, str] = field(default_factory=dict)
     log_residual: FloatArray = field(default_factory=lambda: np.zeros(0))
+    model_ohm: FloatArray = field(default_factory=lambda: np.zeros(0))
     force_inverted_n: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def estimate(self, name: str) -> ParameterEstimate:
@@ -229,11 +230,15 @@ class _Problem:
                 hi.append(LOG_BOUND)
         return np.array(lo), np.array(hi)
 
-    def log_residual(self, params: SensorParams) -> FloatArray:
-        """ln R_measured - ln R_model on every row (NaN where either side is not finite)."""
+    def model_ohm(self, params: SensorParams) -> FloatArray:
+        """The model's resistance on every row, driven by the record's force history."""
         model = SensorModel(self.effects, params)
         out, _ = model.simulate(self.force, self.data.time_s, temperature_c=self.temp)
-        r_model = out.total_ohm[:, 0]
+        return np.asarray(out.total_ohm[:, 0])
+
+    def log_residual(self, params: SensorParams) -> FloatArray:
+        """ln R_measured - ln R_model on every row (NaN where either side is not finite)."""
+        r_model = self.model_ohm(params)
         with np.errstate(divide="ignore", invalid="ignore"):
             res = np.log(self.data.resistance_ohm) - np.log(r_model)
         return np.asarray(np.where(np.isfinite(res), res, np.nan))
@@ -278,7 +283,10 @@ def fit_channel(
         params = replace(params, **{worst: getattr(prior, worst)})
         params, x, jac, free = _solve(data, chosen, params, free, loss)
     problem = _Problem(data, chosen, params, free)
-    residual_all = problem.log_residual(params)
+    model_all = problem.model_ohm(params)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        residual_all = np.log(data.resistance_ohm) - np.log(model_all)
+    residual_all = np.where(np.isfinite(residual_all), residual_all, np.nan)
     sigma = _sigma(jac, problem.residual(problem.x0()), len(free))
     corr = _correlation(jac, len(free))
     estimates = []
@@ -308,6 +316,7 @@ def fit_channel(
         n_parameters=len(free),
         fixed_reasons={k: v for k, v in reasons.items() if k not in free},
         log_residual=residual_all,
+        model_ohm=model_all,
         force_inverted_n=force_inv,
     )
 

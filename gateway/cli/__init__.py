@@ -6,6 +6,7 @@ import click
 
 from .calibrate_cmd import calibrate_cmd
 from .config_cmd import channels, check_config
+from .discrepancy_cmd import discrepancy_cmd
 from .model_cmd import model
 
 
@@ -19,5 +20,6 @@ main.add_command(model)
 main.add_command(check_config)
 main.add_command(channels)
 main.add_command(calibrate_cmd)
+main.add_command(discrepancy_cmd)
 
 __all__ = ["main"]

@@ -1,0 +1,68 @@
+"""``tactile-gateway discrepancy``: find the physical effect the model is missing."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ..discrepancy import decimate, run_discrepancy
+from ..errors import RecordError
+from ..fitting import FitData
+from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
+from ..records import read_record
+from .common import parse_assignments
+
+
+@click.command("discrepancy")
+@click.argument("record_path", metavar="RECORD.csv", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--channel", "channel_name", default=None, help="channel to examine (needed if several)")
+@click.option("--baseline", default="tunneling", show_default=True, help="effects of the starting model")
+@click.option(
+    "--candidates", default=None, help="effects to try (default: every spec effect not in the model)"
+)
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE", help="prior value of a parameter")
+@click.option(
+    "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), help="write DIR/report.md"
+)
+@click.option("--json", "as_json", is_flag=True, help="print the spec's JSON object and nothing else")
+def discrepancy_cmd(
+    record_path: Path,
+    channel_name: str | None,
+    baseline: str,
+    candidates: str | None,
+    params: tuple[str, ...],
+    out_dir: Path | None,
+    as_json: bool,
+) -> None:
+    """Fit the baseline, find where it disagrees, add the missing effects one by one."""
+    try:
+        base = parse_effects(baseline)
+        cands = None if candidates is None else parse_effects(candidates)
+        prior = SensorParams().with_overrides(parse_assignments(params, "--param"))
+        record = read_record(record_path, require_force=True)
+        channel = record.channel(channel_name)
+    except (RecordError, UnknownEffectError, ParameterError) as exc:
+        raise click.UsageError(str(exc)) from None
+    try:
+        report = run_discrepancy(channel, base, cands, prior, record_name=str(record_path))
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from None
+    if out_dir is not None:
+        from ..discrepancy_report import write_report
+
+        write_report(report, FitData.from_channel(decimate(channel)), out_dir)
+    if as_json:
+        click.echo(json.dumps(report.as_json()))
+        return
+    for i, step in enumerate(report.steps, start=1):
+        click.echo(f"step {i}: model {', '.join(step.effects_before)}")
+        for f in step.findings:
+            click.echo(f"  - {f.sentence}")
+        click.echo(f"  -> {'add ' + step.added if step.added else 'add nothing'}: {step.evidence}")
+    j = report.as_json()
+    click.echo(f"added: {', '.join(j['added']) or 'nothing'}; final model: {', '.join(j['final'])}")
+    click.echo(f"held-out gap before: {j['gap_before']}, after: {j['gap_after']}")
+    if out_dir is not None:
+        click.echo(f"wrote {out_dir / 'report.md'}")

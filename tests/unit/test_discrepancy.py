@@ -1,0 +1,174 @@
+"""The discrepancy workflow names the effect hidden in data from the simulated world.
+
+Records come from the simulated array's physics: the paper's model for tunneling, contact
+and creep, and ``sim_device.world`` (written independently of ``gateway.model``) for the
+hidden effect, driven by the built-in ``discrepancy`` protocol (log-spaced loads 0.2-8 N,
+holds, unload-and-hold, ramps at two rates, cycles, a temperature step), with 1 %
+log-normal resistance noise.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from gateway.cli import main
+from gateway.discrepancy import DiscrepancyReport, run_discrepancy
+from gateway.model import SensorModel, SensorParams
+from gateway.records import ChannelRecord, format_record, write_record
+from sim_device.scenarios import Scenario
+from sim_device.world import World
+
+NOISE = 0.01
+PAPER = ("tunneling", "contact", "creep")
+SEEDS = (1, 2, 3)
+# hidden effect -> (baseline, what the workflow must name)
+CASES: dict[str, tuple[tuple[str, ...], frozenset[str]]] = {
+    "nothing": (PAPER, frozenset()),
+    "paper physics, tunneling baseline": (("tunneling",), frozenset({"contact", "creep"})),
+    "creep2": (PAPER, frozenset({"creep2"})),
+    "hysteresis": (PAPER, frozenset({"hysteresis"})),
+    "temperature": (PAPER, frozenset({"temperature"})),
+    "series_resistance": (PAPER, frozenset({"series_resistance"})),
+    "leakage": (PAPER, frozenset({"leakage"})),
+}
+
+
+def world_channel(hidden: tuple[str, ...], seed: int, dt_s: float = 2.0) -> ChannelRecord:
+    """One channel of the simulated array under the discrepancy protocol, as a record."""
+    rng = np.random.default_rng(seed)
+    scenario = Scenario.builtin("discrepancy")
+    t = np.arange(0.0, scenario.duration_s or 4800.0, dt_s)
+    force = scenario.force_n(t)[:, :1]
+    temp = scenario.temperature_c(t)[:, :1]
+    params = SensorParams(
+        r0_ohm=200e3 * rng.uniform(0.85, 1.15),
+        e0_pa=15e6 * rng.uniform(0.9, 1.1),
+        e1_pa=150e6 * rng.uniform(0.9, 1.1),
+        mu1_pa_s=1.5e10 * rng.uniform(0.9, 1.1),
+        rho2_ohm_m=rng.uniform(0.9, 1.1),
+        series_resistance_ohm=5000.0,
+        leakage_resistance_ohm=1e6,
+    )
+    model = SensorModel(PAPER, params)
+    breakdown, _ = model.simulate(force, t)
+    world = World(hidden, [params], model.gamma_s0())
+    r = world.apply(breakdown, force, temp, dt_s)[:, 0] * np.exp(NOISE * rng.standard_normal(t.size))
+    return ChannelRecord("0", t, r, force[:, 0], temp[:, 0], np.arange(t.size))
+
+
+@cache
+def outcome(case: str, seed: int) -> DiscrepancyReport:
+    baseline, _ = CASES[case]
+    hidden = () if case in ("nothing", "paper physics, tunneling baseline") else (case,)
+    return run_discrepancy(world_channel(hidden, seed), baseline=baseline, record_name=f"{case}-{seed}")
+
+
+def test_confusion_table_names_exactly_the_hidden_effect() -> None:
+    rows = []
+    wrong = []
+    for case, (_, expected) in CASES.items():
+        named: Counter[str] = Counter()
+        for seed in SEEDS:
+            report = outcome(case, seed)
+            got = frozenset(report.added)
+            named.update(report.added or ["(nothing)"])
+            if got != expected:
+                wrong.append((case, seed, sorted(got)))
+        rows.append(f"| {case} | {', '.join(f'{k} x{v}' for k, v in sorted(named.items()))} |")
+    table = "\n".join(["| hidden | named (over seeds 1-3) |", "|---|---|", *rows])
+    print("\n" + table)
+    assert not wrong, f"wrong verdicts: {wrong}\n{table}"
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_every_named_effect_shrinks_the_held_out_gap_down_to_the_noise(case: str) -> None:
+    for seed in SEEDS:
+        report = outcome(case, seed)
+        gaps = [report.steps[0].fit_before.gap_test.log_resistance_rms]
+        for step in report.steps:
+            if step.added:
+                gaps.append(
+                    next(c.gap_test.log_resistance_rms for c in step.candidates if c.effect == step.added)
+                )
+        assert all(b < a for a, b in zip(gaps, gaps[1:], strict=False)), (case, seed, gaps)
+        final = report.final_fit.gap_test.log_resistance_rms
+        assert final <= 1.5 * NOISE, (case, seed, final)
+
+
+def test_from_the_tunneling_baseline_the_gap_shrinks_at_least_five_fold() -> None:
+    for seed in SEEDS:
+        j = outcome("paper physics, tunneling baseline", seed).as_json()
+        before, after = j["gap_before"]["log_resistance_rms"], j["gap_after"]["log_resistance_rms"]
+        print(
+            f"\nseed {seed}: held-out log-R RMS {before} -> {after}, force RMS "
+            f"{j['gap_before']['force_rms_n']} -> {j['gap_after']['force_rms_n']} N"
+        )
+        assert after * 5 <= before
+        assert j["gap_after"]["force_rms_n"] < j["gap_before"]["force_rms_n"]
+
+
+def test_json_object_has_the_spec_keys_and_meanings() -> None:
+    report = outcome("paper physics, tunneling baseline", 1)
+    j = json.loads(json.dumps(report.as_json()))
+    assert {"record", "baseline", "added", "final", "gap_before", "gap_after", "steps"} <= set(j)
+    assert j["baseline"] == ["tunneling"]
+    assert j["final"] == ["tunneling", "contact", "creep"]
+    assert [s["added"] for s in j["steps"]] == j["added"]
+    for s in j["steps"]:
+        assert set(s["gap"]) == {"log_resistance_rms", "force_rms_n"}
+        assert isinstance(s["evidence"], str) and s["evidence"]
+    assert j["gap_after"] == j["steps"][-1]["gap"]
+
+
+def test_no_temperature_column_means_no_temperature_candidate() -> None:
+    ch = world_channel((), 4)
+    no_temp = ChannelRecord(ch.name, ch.time_s, ch.resistance_ohm, ch.force_n, None, ch.line)
+    report = run_discrepancy(no_temp, baseline=PAPER)
+    assert "temperature" not in report.candidates
+    assert any("no temperature column" in n for n in report.notes)
+
+
+def test_cli_json_and_report(tmp_path: Path) -> None:
+    ch = world_channel(("temperature",), 5)
+    rec = tmp_path / "world.csv"
+    write_record(
+        rec,
+        format_record(
+            {"source": "sim world"},
+            ["0"],
+            ch.time_s,
+            ch.resistance_ohm[:, None],
+            force_n=ch.force_n[:, None],  # type: ignore[index]
+            temperature_c=ch.temperature_c[:, None],  # type: ignore[index]
+        ),
+    )
+    out = tmp_path / "report"
+    result = CliRunner().invoke(
+        main, ["discrepancy", str(rec), "--baseline", "tunneling,contact,creep", "--out", str(out), "--json"]
+    )
+    assert result.exit_code == 0, result.output
+    j = json.loads(result.stdout)  # nothing but the JSON object on stdout
+    assert j["added"] == ["temperature"]
+    assert j["record"] == str(rec)
+    text = (out / "report.md").read_text()
+    assert "Decision: add `temperature`" in text
+    assert "above 27 °C the measured resistance is" in text or "°C" in text
+    assert sorted(p.name for p in out.glob("*.png")) == ["step1_residuals.png", "step2_residuals.png"]
+
+
+def test_cli_refuses_unknown_effects_and_channels(tmp_path: Path) -> None:
+    rec = tmp_path / "r.csv"
+    rec.write_text("time_s,channel,resistance_ohm,force_n\n0,a,1e5,1\n0,b,1e5,1\n")
+    result = CliRunner().invoke(
+        main, ["discrepancy", str(rec), "--channel", "a", "--candidates", "hysterisis"]
+    )
+    assert result.exit_code == 2 and "did you mean 'hysteresis'" in result.output
+    result = CliRunner().invoke(main, ["discrepancy", str(rec)])
+    assert result.exit_code == 2 and "the record has 2 channels" in result.output
