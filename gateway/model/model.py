@@ -11,8 +11,8 @@ and d in [-1, 1] the load direction of the hysteresis effect: +1 after loading, 
 unloading. d follows the force through a narrow play (backlash) operator, p <- clip(p, F - w,
 F + w) with w = 0.1 F_h, so that noise does not wander it, and then approaches the sign of
 each play move exponentially in the force travelled (a Duhem / Bouc-Wen form):
-d <- sign(dp) + (d - sign(dp)) exp(-|dp| / F_h), F_h = ``hysteresis_force_n``. State is passed in and returned (``ModelState``); nothing is hidden in
-the model object.
+d <- sign(dp) + (d - sign(dp)) exp(-|dp| / F_h), F_h = ``hysteresis_force_n``. State is
+passed in and returned (``ModelState``); nothing is hidden in the model object.
 
 Time stepping convention (shared by the forward model and the inversion, so a round trip
 is exact): at each sample the state is first *relaxed* over the elapsed time with the

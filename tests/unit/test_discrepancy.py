@@ -9,6 +9,7 @@ log-normal resistance noise.
 
 from __future__ import annotations
 
+import itertools
 import json
 from collections import Counter
 from functools import cache
@@ -97,7 +98,7 @@ def test_every_named_effect_shrinks_the_held_out_gap_down_to_the_noise(case: str
                 gaps.append(
                     next(c.gap_test.log_resistance_rms for c in step.candidates if c.effect == step.added)
                 )
-        assert all(b < a for a, b in zip(gaps, gaps[1:], strict=False)), (case, seed, gaps)
+        assert all(b < a for a, b in itertools.pairwise(gaps)), (case, seed, gaps)
         final = report.final_fit.gap_test.log_resistance_rms
         assert final <= 1.5 * NOISE, (case, seed, final)
 
