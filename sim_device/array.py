@@ -1,0 +1,373 @@
+"""One simulated sensor array: clock, physics, electronics and register images (no I/O).
+
+Physics per channel (SI units)
+------------------------------
+The paper's sensor, ``SensorModel(("tunneling", "contact", "creep"), params)`` of
+``gateway.model``: R = 2 R_con(F) + R0 (1 - eps) exp(-gamma s0 eps) with creeping strain
+eps = F/(A E0(F)) + e_kv (eq. 13-17), then the world effects of ``sim_device.world``.
+
+Electronics (paper Fig. 4b, eq. 18)
+-----------------------------------
+The sensor r and the fixed resistor R_ref form a divider, ``V_o = R_ref / (R_ref + r) V+``;
+a ratiometric ADC converts ``counts = round(V_o / V+ (2^bits - 1) + noise)``, clipped to the
+rails, with Gaussian noise of ``noise_lsb_rms`` LSB (seeded). The measured resistance is
+``r = R_ref (V+ / V_o - 1)`` from the counts (``gateway.model.Divider``): 0 counts reads
++inf (open), full scale reads 0 (short). A channel set open reads 0 counts, a shorted one
+full scale, without noise (the input is clamped to a rail).
+
+Clock
+-----
+Device time is ``speed * (clock() - start)`` seconds. Samples are taken every
+``sample_period_s`` of device time; the physics is advanced lazily to the current device
+time whenever registers are read (``advance``), integrating creep on the sample grid,
+vectorized over the pending samples. If more than ``MAX_WORK / N`` samples are pending (a
+long idle at high speed), the gap is crossed in that many coarser, equal steps so a read
+never stalls; the sample counter still counts every conversion.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gateway.model import Divider, ModelState, SensorModel, SensorParams
+
+from .config import ArrayConfig, check_electronics
+from .faults import CHANNEL_MODES, FaultInjector
+from .registers import Electronics, InputImage, decode_holding_write, holding_image
+from .scenarios import Scenario
+from .world import World
+
+FloatArray = NDArray[np.float64]
+Listener = Callable[["SampleBatch"], None]
+
+#: Bound on samples x channels simulated per catch-up (see the module docstring).
+MAX_WORK = 400_000
+PAPER_MODEL_EFFECTS = ("tunneling", "contact", "creep")
+VENDOR_NAME = "Tactile Gateway Project"
+PRODUCT_CODE = "TSA-SIM"
+PRODUCT_NAME = "Simulated MIS piezoresistive sensor array"
+
+
+def package_version() -> str:
+    """The installed project version (``MajorMinorRevision`` of the device identification)."""
+    try:
+        return importlib.metadata.version("tactile-gateway")
+    except importlib.metadata.PackageNotFoundError:
+        return "0.0.0+unknown"
+
+
+@dataclass(frozen=True)
+class SampleBatch:
+    """Consecutive ADC conversions of one array; arrays are (T,) or (T, N)."""
+
+    device_id: int
+    time_s: FloatArray
+    adc_counts: NDArray[np.int64]
+    resistance_ohm: FloatArray  # measured, from the counts by eq. 18
+    true_resistance_ohm: FloatArray  # before the ADC, no noise
+    force_n: FloatArray
+    temperature_c: FloatArray
+    modes: NDArray[np.int8]
+
+    def last(self) -> SampleBatch:
+        """A batch holding only the last sample."""
+        return SampleBatch(
+            self.device_id,
+            self.time_s[-1:],
+            self.adc_counts[-1:],
+            self.resistance_ohm[-1:],
+            self.true_resistance_ohm[-1:],
+            self.force_n[-1:],
+            self.temperature_c[-1:],
+            self.modes[-1:],
+        )
+
+
+class SimArray:
+    """A simulated array of N piezoresistive sensors behind one Modbus device id."""
+
+    def __init__(
+        self,
+        config: ArrayConfig | None = None,
+        device_id: int = 1,
+        *,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
+        self.config = config or ArrayConfig()
+        if isinstance(device_id, bool) or not isinstance(device_id, int) or not 1 <= device_id <= 247:
+            raise ValueError(f"device_id = {device_id!r} must be an integer in 1..247")
+        self.device_id = device_id
+        cfg = self.config
+        self.layout = cfg.layout
+        self.scenario: Scenario = cfg.resolve_scenario()
+        self._params = cfg.sensor_params(device_id)
+        self._model = SensorModel(PAPER_MODEL_EFFECTS, self._params)
+        self._world = World(cfg.world_effects, self._params, self._model.gamma_s0())
+        self._state: ModelState = self._model.initial_state()
+        self._n = cfg.channels
+        self._electronics = Electronics(
+            adc_bits=cfg.adc_bits,
+            supply_v=float(cfg.supply_v),
+            reference_ohm=float(cfg.reference_ohm),
+            sample_period_s=float(cfg.sample_period_s),
+            noise_lsb_rms=float(cfg.noise_lsb_rms),
+        )
+        self._divider = self._make_divider()
+        self._modes = np.zeros(self._n, dtype=np.int8)
+        self._rng = np.random.default_rng([cfg.seed, device_id, 1])
+        self.faults = FaultInjector(seed=cfg.seed * 1000 + device_id)
+        for event in self.scenario.faults:
+            self.faults.schedule_event(event)
+        self._clock = clock or time.monotonic
+        self._wall0 = self._clock()
+        self._listeners: list[Listener] = []
+        self._version = 0
+        self._image = InputImage(self._n)
+        self._image_version = -1
+        self._image_words: list[int] = []
+        self._counter = 0
+        self._grid_t0 = 0.0
+        self._grid_index = 0
+        self._last_t = 0.0
+        self._last_batch: SampleBatch
+        self._process(np.zeros(1), 0.0, 1)
+
+    # ------------------------------------------------------------------- properties
+    @property
+    def n_channels(self) -> int:
+        return self._n
+
+    @property
+    def channel_params(self) -> list[SensorParams]:
+        """The true parameters of every channel (after part-to-part spread)."""
+        return list(self._params)
+
+    @property
+    def world_effects(self) -> tuple[str, ...]:
+        return self.config.world_effects
+
+    @property
+    def device_time_s(self) -> float:
+        """Current device time in s (wall clock since creation times ``speed``)."""
+        return (self._clock() - self._wall0) * self.config.speed
+
+    @property
+    def sample_counter(self) -> int:
+        """ADC conversions since start (not wrapped; the register wraps at 2^32)."""
+        return self._counter
+
+    @property
+    def last_sample_time_s(self) -> float:
+        return self._last_t
+
+    @property
+    def electronics(self) -> Electronics:
+        return self._electronics
+
+    @property
+    def divider(self) -> Divider:
+        return self._divider
+
+    @property
+    def modes(self) -> NDArray[np.int8]:
+        """Channel modes now: 0 normal, 1 open, 2 short."""
+        return self._modes.copy()
+
+    @property
+    def version(self) -> int:
+        """Changes whenever the register contents may have changed."""
+        return self._version
+
+    @property
+    def model_name(self) -> str:
+        return f"Linqstat {self.layout.rows}x{self.layout.columns}"
+
+    def identity(self) -> dict[str, str]:
+        """Device identification objects (Modbus function 43 / MEI 14), by name."""
+        return {
+            "VendorName": VENDOR_NAME,
+            "ProductCode": PRODUCT_CODE,
+            "MajorMinorRevision": package_version(),
+            "ProductName": PRODUCT_NAME,
+            "ModelName": self.model_name,
+        }
+
+    # --------------------------------------------------------------------- truth
+    def true_force_n(self) -> FloatArray:
+        """True force of every channel (N) at the current device time, shape (N,)."""
+        return self.scenario.force_n(np.array([self.device_time_s]))[0]
+
+    def true_temperature_c(self) -> FloatArray:
+        """True temperature of every channel (°C) at the current device time, shape (N,)."""
+        return self.scenario.temperature_c(np.array([self.device_time_s]))[0]
+
+    def latest(self) -> SampleBatch:
+        """The latest ADC conversion (a one-sample batch); does not advance the clock."""
+        return self._last_batch
+
+    # ------------------------------------------------------------------- control
+    def set_channel_mode(self, index: int, mode: str | int) -> None:
+        """Set channel ``index`` to "normal", "open" or "short" (or 0, 1, 2) from now on."""
+        if isinstance(index, bool) or not isinstance(index, int | np.integer) or not 0 <= index < self._n:
+            raise ValueError(f"channel index {index!r} outside 0..{self._n - 1}")
+        index = int(index)
+        code = CHANNEL_MODES.get(mode) if isinstance(mode, str) else mode
+        if code not in (0, 1, 2) or isinstance(code, bool):
+            raise ValueError(f"channel mode {mode!r} must be one of {', '.join(CHANNEL_MODES)} or 0, 1, 2")
+        self.advance()
+        self._modes[index] = code
+        self._version += 1
+
+    def set_electronics(self, **changes: float) -> None:
+        """Change divider/ADC settings (adc_bits, supply_v, reference_ohm, sample_period_s,
+        noise_lsb_rms) from now on; the same limits as the holding registers apply."""
+        checked = {}
+        for name, value in changes.items():
+            if name not in Electronics.__dataclass_fields__:
+                raise ValueError(f"unknown electronics setting {name!r}")
+            checked[name] = check_electronics(name, value)
+        self.advance()
+        self._apply_electronics(checked)
+
+    def _apply_electronics(self, changes: dict[str, float]) -> None:
+        if not changes:
+            return
+        if "adc_bits" in changes:
+            changes = {**changes, "adc_bits": int(changes["adc_bits"])}
+        old_period = self._electronics.sample_period_s
+        self._electronics = replace(self._electronics, **changes)  # type: ignore[arg-type]
+        self._divider = self._make_divider()
+        if self._electronics.sample_period_s != old_period:
+            self._grid_t0, self._grid_index = self._last_t, 0
+        self._version += 1
+
+    def _make_divider(self) -> Divider:
+        e = self._electronics
+        return Divider(supply_v=e.supply_v, reference_ohm=e.reference_ohm, adc_bits=e.adc_bits)
+
+    def add_listener(self, listener: Listener) -> None:
+        """Call ``listener(batch)`` with every new batch of samples."""
+        self._listeners.append(listener)
+
+    def remove_listener(self, listener: Listener) -> None:
+        if listener in self._listeners:
+            self._listeners.remove(listener)
+
+    # ------------------------------------------------------------------- physics
+    def advance(self, until_s: float | None = None, *, exact: bool = False) -> int:
+        """Simulate every conversion due up to ``until_s`` (default: now); returns their number.
+
+        ``exact=True`` never uses coarse steps (for offline records); it works in chunks.
+        """
+        now = self.device_time_s if until_s is None else float(until_s)
+        period = self._electronics.sample_period_s
+        due = math.floor((now - self._grid_t0) / period + 1e-9) - self._grid_index
+        if due <= 0:
+            return 0
+        max_steps = max(1, MAX_WORK // self._n)
+        if not exact and due > max_steps:
+            self._grid_index += due
+            end_t = self._grid_t0 + self._grid_index * period
+            step = (end_t - self._last_t) / max_steps
+            times = np.asarray(self._last_t + step * np.arange(1, max_steps + 1), dtype=np.float64)
+            times[-1] = end_t
+            self._process(times, step, due)
+            return due
+        done = 0
+        while done < due:
+            k = min(max_steps, due - done)
+            idx = self._grid_index + np.arange(1, k + 1)
+            times = np.asarray(self._grid_t0 + idx * period, dtype=np.float64)
+            self._grid_index += k
+            self._process(times, period, k)
+            done += k
+        return due
+
+    def _mode_series(self, times: FloatArray) -> NDArray[np.int8]:
+        modes = np.broadcast_to(self._modes, (times.shape[0], self._n)).copy()
+        for at_s, channel, code in self.faults.pop_channel_events(float(times[-1])):
+            if channel >= self._n:
+                continue
+            modes[times >= at_s, channel] = code
+            self._modes[channel] = code
+        return modes
+
+    def _process(self, times: FloatArray, dt_s: float, conversions: int) -> None:
+        force = self.scenario.force_n(times)
+        temperature = self.scenario.temperature_c(times)
+        modes = self._mode_series(times)
+        breakdown, self._state = self._model.simulate(force, times, self._state, t0_s=self._last_t)
+        true_r = self._world.apply(breakdown, force, temperature, dt_s)
+        counts = self._convert(true_r, modes)
+        measured, _status = self._divider.resistance(counts)
+        self._counter += conversions
+        self._last_t = float(times[-1])
+        batch = SampleBatch(self.device_id, times, counts, measured, true_r, force, temperature, modes)
+        self._last_batch = batch.last() if times.shape[0] > 1 else batch
+        self._version += 1
+        for listener in list(self._listeners):
+            listener(batch)
+
+    def _convert(self, true_r: FloatArray, modes: NDArray[np.int8]) -> NDArray[np.int64]:
+        """Divider + ADC (eq. 18): ratiometric counts with Gaussian noise, clipped to the rails."""
+        d = self._divider
+        fs = d.full_scale
+        ratio = d.output_voltage(true_r) / d.supply_v
+        code = ratio * fs
+        if self._electronics.noise_lsb_rms > 0.0:
+            code = code + self._electronics.noise_lsb_rms * self._rng.standard_normal(code.shape)
+        counts = np.clip(np.rint(code), 0, fs).astype(np.int64)
+        counts[modes == CHANNEL_MODES["open"]] = 0
+        counts[modes == CHANNEL_MODES["short"]] = fs
+        return counts
+
+    # ----------------------------------------------------------------- registers
+    def input_registers(self) -> list[int]:
+        """Input registers 0 .. 2200+2N-1 after advancing to now (see docs/register-map.md)."""
+        self.advance()
+        if self._image_version != self._version:
+            b = self._last_batch
+            counts = b.adc_counts[0]
+            modes = b.modes[0]
+            fs = self._divider.full_scale
+            normal = modes == CHANNEL_MODES["normal"]
+            self._image_words = self._image.update(
+                sample_counter=self._counter,
+                device_time_ms=round(self._last_t * 1000.0),
+                open_=modes == CHANNEL_MODES["open"],
+                short=modes == CHANNEL_MODES["short"],
+                saturated=normal & ((counts <= 1) | (counts >= fs - 1)),
+                adc_counts=counts,
+                resistance_ohm=b.resistance_ohm[0],
+                true_force_n=b.force_n[0],
+                temperature_c=b.temperature_c[0],
+                true_resistance_ohm=b.true_resistance_ohm[0],
+            )
+            self._image_version = self._version
+        return self._image_words
+
+    def holding_registers(self) -> list[int]:
+        """Holding registers 0 .. 100+N-1 with the current configuration."""
+        return holding_image(
+            self._n,
+            self.layout.columns,
+            round(self.layout.pitch_mm * 1000.0),
+            self._electronics,
+            self._modes,
+        )
+
+    def write_holding(self, address: int, values: list[int]) -> None:
+        """Apply a Modbus write of holding registers, or raise ``RegisterWriteError`` (no change)."""
+        change = decode_holding_write(self.holding_registers(), self._n, address, values)
+        self.advance()
+        self._apply_electronics(dict(change.electronics))
+        for channel, code in change.modes.items():
+            self._modes[channel] = code
+        self._version += 1

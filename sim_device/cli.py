@@ -1,0 +1,274 @@
+"""``tactile-sim``: run simulated arrays behind a Modbus server, or list the built-in scenarios.
+
+Examples::
+
+    tactile-sim run --tcp 127.0.0.1:5020 --scenario holds --speed 60
+    tactile-sim run --rtu /dev/ttyUSB0 --baud 19200 --device-ids 1,2,3 --world-effects creep2
+    tactile-sim run --rtu-tcp 127.0.0.1:5021 --scenario my_protocol.toml --record out.csv
+    tactile-sim run --tls 0.0.0.0:802 --cert server.crt --key server.key
+    tactile-sim scenarios
+
+SIGINT and SIGTERM stop the server cleanly (a recording is closed as a valid file).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import signal
+import sys
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import click
+
+from .array import SimArray
+from .config import WORLD_EFFECTS, ArrayConfig, ConfigError, parse_world_effects
+from .faults import FaultError
+from .modbus_server import ServerStartError, SimServer, serve_serial, serve_tcp, serve_tls
+from .record import Recorder, array_metadata
+from .scenarios import Scenario, ScenarioError, builtin_scenarios
+
+_USER_ERRORS = (ConfigError, ScenarioError, ServerStartError, FaultError, OSError, ValueError)
+
+
+def _host_port(text: str, option: str) -> tuple[str, int]:
+    """Parse HOST:PORT (``[v6]:PORT`` for IPv6; an empty host listens on all interfaces)."""
+    host, sep, port_text = text.rpartition(":")
+    if not sep:
+        raise click.BadParameter(f"{text!r} is not HOST:PORT", param_hint=option)
+    host = host.strip("[]") or "0.0.0.0"
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise click.BadParameter(
+            f"port {port_text!r} in {text!r} is not a number", param_hint=option
+        ) from None
+    if not 0 <= port <= 65535:
+        raise click.BadParameter(f"port {port} is outside 0..65535", param_hint=option)
+    return host, port
+
+
+def _device_ids(text: str) -> list[int]:
+    ids: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        try:
+            value = int(part)
+        except ValueError:
+            raise click.BadParameter(f"{part!r} is not an integer", param_hint="--device-ids") from None
+        if not 1 <= value <= 247:
+            raise click.BadParameter(f"device id {value} is outside 1..247", param_hint="--device-ids")
+        ids.append(value)
+    if not ids or len(set(ids)) != len(ids):
+        raise click.BadParameter(f"need distinct device ids, got {text!r}", param_hint="--device-ids")
+    return ids
+
+
+@dataclass(frozen=True)
+class _Transport:
+    kind: str  # tcp | rtu | rtu-tcp | tls
+    host: str = ""
+    port: int = 0
+    device: str = ""
+
+
+def _transport(tcp: str | None, rtu: str | None, rtu_tcp: str | None, tls: str | None) -> _Transport:
+    given = [(k, v) for k, v in (("tcp", tcp), ("rtu", rtu), ("rtu-tcp", rtu_tcp), ("tls", tls)) if v]
+    if len(given) > 1:
+        raise click.UsageError("give only one of --tcp, --rtu, --rtu-tcp, --tls")
+    if not given:
+        return _Transport("tcp", "127.0.0.1", 5020)
+    kind, value = given[0]
+    assert value is not None
+    if kind == "rtu":
+        return _Transport("rtu", device=value)
+    host, port = _host_port(value, f"--{kind}")
+    return _Transport(kind, host, port)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def main() -> None:
+    """Simulated MIS tactile sensor arrays (piezoresistive, Kalantari et al.) on Modbus."""
+
+
+@main.command("scenarios")
+def scenarios_cmd() -> None:
+    """List the built-in scenarios with a one-line description each."""
+    table = builtin_scenarios()
+    width = max(len(name) for name in table)
+    for name, description in table.items():
+        click.echo(f"{name:<{width}}  {description}")
+
+
+@main.command("run")
+@click.option("--tcp", metavar="HOST:PORT", help="Modbus TCP (default 127.0.0.1:5020).")
+@click.option("--rtu", metavar="DEVICE", help="Modbus RTU on a serial device.")
+@click.option("--rtu-tcp", metavar="HOST:PORT", help="RTU framing over TCP.")
+@click.option("--tls", metavar="HOST:PORT", help="Modbus/TCP over TLS (needs --cert and --key).")
+@click.option("--cert", type=click.Path(dir_okay=False), help="TLS certificate (PEM).")
+@click.option("--key", type=click.Path(dir_okay=False), help="TLS private key (PEM).")
+@click.option(
+    "--baud", type=click.IntRange(min=1), default=115200, show_default=True, help="Serial baud rate."
+)
+@click.option(
+    "--line-timing/--no-line-timing", default=True, show_default=True, help="Emulate RTU wire time."
+)
+@click.option("--turnaround-ms", type=click.FloatRange(min=0.0), default=0.0, show_default=True)
+@click.option("--channels", type=click.IntRange(1, 256), default=16, show_default=True)
+@click.option(
+    "--columns", type=click.IntRange(1, 256), default=None, help="Grid columns [default: ceil(sqrt(N))]."
+)
+@click.option("--pitch-mm", type=click.FloatRange(min=0.001, max=65.535), default=2.5, show_default=True)
+@click.option("--device-ids", default="1", show_default=True, help="Comma-separated ids, one array each.")
+@click.option("--scenario", default="idle", show_default=True, help="Built-in name or TOML file.")
+@click.option("--speed", type=float, default=1.0, show_default=True, help="Device seconds per wall second.")
+@click.option("--seed", type=click.IntRange(min=0), default=1, show_default=True)
+@click.option("--world-effects", default="", help=f"Comma-separated: {', '.join(WORLD_EFFECTS)}.")
+@click.option("--no-spread", is_flag=True, help="Identical channels (no part-to-part spread).")
+@click.option("--noise-lsb", type=float, default=2.0, show_default=True, help="ADC noise, LSB RMS.")
+@click.option("--sample-period", type=float, default=0.01, show_default=True, help="ADC sample period, s.")
+@click.option(
+    "--record", "record_path", type=click.Path(dir_okay=False), help="Write a measurement record CSV."
+)
+@click.option("--record-period", type=float, default=0.1, show_default=True, help="Record row period, s.")
+@click.option(
+    "--stop-after", type=click.FloatRange(min=0.0), default=None, help="Stop after this many wall seconds."
+)
+def run_cmd(
+    tcp: str | None,
+    rtu: str | None,
+    rtu_tcp: str | None,
+    tls: str | None,
+    cert: str | None,
+    key: str | None,
+    baud: int,
+    line_timing: bool,
+    turnaround_ms: float,
+    channels: int,
+    columns: int | None,
+    pitch_mm: float,
+    device_ids: str,
+    scenario: str,
+    speed: float,
+    seed: int,
+    world_effects: str,
+    no_spread: bool,
+    noise_lsb: float,
+    sample_period: float,
+    record_path: str | None,
+    record_period: float,
+    stop_after: float | None,
+) -> None:
+    """Serve simulated arrays until SIGINT/SIGTERM (or --stop-after)."""
+    transport = _transport(tcp, rtu, rtu_tcp, tls)
+    if transport.kind == "tls" and not (cert and key):
+        raise click.UsageError("--tls needs --cert and --key")
+    if (cert or key) and transport.kind != "tls":
+        raise click.UsageError("--cert/--key are only used with --tls")
+    if not (math.isfinite(record_period) and record_period > 0):
+        raise click.BadParameter("must be > 0", param_hint="--record-period")
+    ids = _device_ids(device_ids)
+    cols = columns if columns is not None else min(channels, math.ceil(math.sqrt(channels)))
+    try:
+        effects = parse_world_effects(world_effects)
+        base = ArrayConfig(
+            channels=channels,
+            columns=cols,
+            pitch_mm=pitch_mm,
+            seed=seed,
+            scenario="idle",
+            speed=speed,
+            noise_lsb_rms=noise_lsb,
+            world_effects=effects,
+            param_spread=not no_spread,
+            sample_period_s=sample_period,
+        )
+        loaded = Scenario.load(scenario, base.layout)
+        config = base.with_changes(scenario=loaded)
+        arrays = [SimArray(config, device_id) for device_id in ids]
+        turnaround_s = turnaround_ms / 1000.0
+        options = (baud, line_timing, turnaround_s, cert, key, record_path, record_period, stop_after)
+        serving = _serve(arrays, transport, *options)
+        asyncio.run(serving)
+    except _USER_ERRORS as exc:
+        raise click.ClickException(str(exc)) from None
+
+
+@contextlib.asynccontextmanager
+async def _open(
+    arrays: list[SimArray],
+    t: _Transport,
+    baud: int,
+    line_timing: bool,
+    turnaround_s: float,
+    cert: str | None,
+    key: str | None,
+) -> AsyncIterator[SimServer]:
+    if t.kind == "rtu":
+        async with serve_serial(arrays, t.device, baud, line_timing, turnaround_s) as server:
+            yield server
+    elif t.kind == "tls":
+        assert cert is not None and key is not None
+        async with serve_tls(arrays, t.host, t.port, certfile=cert, keyfile=key) as server:
+            yield server
+    else:
+        async with serve_tcp(arrays, t.host, t.port, "rtu" if t.kind == "rtu-tcp" else "socket") as server:
+            yield server
+
+
+async def _serve(
+    arrays: list[SimArray],
+    t: _Transport,
+    baud: int,
+    line_timing: bool,
+    turnaround_s: float,
+    cert: str | None,
+    key: str | None,
+    record_path: str | None,
+    record_period: float,
+    stop_after: float | None,
+) -> None:
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    handlers: list[signal.Signals] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, stop.set)
+            handlers.append(sig)
+    recorder: Recorder | None = None
+    try:
+        async with _open(arrays, t, baud, line_timing, turnaround_s, cert, key) as server:
+            if record_path:
+                meta = array_metadata(arrays[0], record_period)
+                meta["device_id"] = ",".join(str(a.device_id) for a in arrays)
+                recorder = Recorder(Path(record_path), record_period, meta)
+                for a in arrays:
+                    labels = None if len(arrays) == 1 else [f"{a.device_id}.{i}" for i in range(a.n_channels)]
+                    recorder.attach(a, labels)
+            where = t.device if t.kind == "rtu" else f"{server.host}:{server.port}"
+            ids = ",".join(str(a.device_id) for a in arrays)
+            scenario = arrays[0].scenario
+            click.echo(
+                f"tactile-sim: serving {len(arrays)} array(s) of {arrays[0].n_channels} channels "
+                f"(device ids {ids}) on {t.kind} {where}; scenario {scenario.name}, "
+                f"speed {arrays[0].config.speed:g}",
+                err=True,
+            )
+            sys.stderr.flush()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), timeout=stop_after)
+    finally:
+        if recorder is not None:
+            recorder.close()
+        for sig in handlers:
+            loop.remove_signal_handler(sig)
+    click.echo("tactile-sim: stopped", err=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,496 @@
+"""Modbus transports for simulated arrays (the only module of ``sim_device`` importing pymodbus).
+
+Each ``SimArray`` becomes a pymodbus ``SimDevice`` with non-shared blocks (holding and input
+registers are separate address spaces) and an ``action`` callback that refreshes the
+registers from the array on every access and validates configuration writes.
+
+Transports: Modbus TCP (``serve_tcp``), RTU framing over TCP (``serve_tcp(framer="rtu")``),
+Modbus/TCP over TLS (``serve_tls``) and RTU on a serial device (``serve_serial``, several
+arrays with different device ids on one bus). A request for a device id that is not served
+gets no answer on an RTU bus (nobody there) and exception 11 (gateway target failed to
+respond) over Modbus/TCP.
+
+Line timing (serial): a real RS-485 line needs time to carry the frames. With
+``line_timing=True`` each response is held back until ``(request bytes + response bytes +
+2 x 3.5) x 11 bits / baud + turnaround_s`` after the request arrived: both frames at 11 bits
+per character plus the 3.5-character silent interval that ends each frame.
+
+Fault injection (``SimArray.faults``) happens per request in the connection handler: delay,
+no response, exception response, garbled frame (RTU: bad CRC; Modbus/TCP: bad protocol id)
+and dropped TCP connection.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import ssl
+from collections.abc import AsyncIterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from pymodbus.constants import DeviceInformation, ExcCodes
+from pymodbus.framer import FramerRTU, FramerType
+from pymodbus.pdu import ExceptionResponse, ModbusPDU
+from pymodbus.pdu.device import DeviceInformationFactory, ModbusDeviceIdentification
+from pymodbus.pdu.mei_message import ReadDeviceInformationRequest, ReadDeviceInformationResponse
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer, ModbusTlsServer
+from pymodbus.server.requesthandler import ServerRequestHandler
+from pymodbus.simulator import DataType, SimData, SimDevice
+
+from . import registers as reg
+from .array import SimArray
+from .faults import NO_FAULT, FaultDecision
+
+#: Bits per RTU character on the line (start + 8 data + parity/stop + stop).
+BITS_PER_CHAR = 11
+#: Silent interval that ends an RTU frame, in characters.
+FRAME_GAP_CHARS = 3.5
+_BIT_FUNCTIONS = frozenset({1, 2, 5, 15})
+_INPUT_FUNCTIONS = frozenset({4})
+
+
+class ServerStartError(OSError):
+    """The server could not start (address in use, serial device missing, bad certificate)."""
+
+
+# ----------------------------------------------------------------------- sim devices
+def _register_blocks(n_channels: int, columns: int, pitch_um: int) -> tuple[list[SimData], list[SimData]]:
+    """Holding and input register blocks of the map, with their data types and RO flags."""
+    holding = [
+        SimData(reg.HR_CHANNEL_COUNT, values=n_channels, datatype=DataType.UINT16, readonly=True),
+        SimData(reg.HR_ADC_BITS, values=16, datatype=DataType.UINT16),
+        SimData(reg.HR_SUPPLY_V, values=5.0, datatype=DataType.FLOAT32),
+        SimData(reg.HR_REFERENCE_OHM, values=10e3, datatype=DataType.FLOAT32),
+        SimData(reg.HR_SAMPLE_PERIOD_S, values=0.01, datatype=DataType.FLOAT32),
+        SimData(reg.HR_NOISE_LSB_RMS, values=2.0, datatype=DataType.FLOAT32),
+        SimData(reg.HR_GRID_COLUMNS, values=columns, datatype=DataType.UINT16, readonly=True),
+        SimData(reg.HR_PITCH_UM, values=pitch_um, datatype=DataType.UINT16, readonly=True),
+        SimData(reg.HR_CHANNEL_MODE, count=n_channels, values=0, datatype=DataType.UINT16),
+    ]
+    words = 2 * n_channels
+    inputs = [
+        SimData(reg.IR_SAMPLE_COUNTER, values=0, datatype=DataType.UINT32),
+        SimData(reg.IR_DEVICE_TIME_MS, values=0, datatype=DataType.UINT64),
+        SimData(reg.IR_STATUS_SUMMARY, values=0, datatype=DataType.UINT16),
+        SimData(reg.IR_OPEN_BITMAP, count=3 * reg.BITMAP_WORDS, values=0, datatype=DataType.UINT16),
+        SimData(reg.IR_ADC_COUNTS, count=n_channels, values=0, datatype=DataType.UINT16),
+        SimData(reg.IR_RESISTANCE, count=words, values=0, datatype=DataType.REGISTERS),
+        SimData(reg.IR_TRUE_FORCE, count=words, values=0, datatype=DataType.REGISTERS),
+        SimData(reg.IR_TEMPERATURE, count=words, values=0, datatype=DataType.REGISTERS),
+        SimData(reg.IR_TRUE_RESISTANCE, count=words, values=0, datatype=DataType.REGISTERS),
+    ]
+    return holding, inputs
+
+
+def _bit_block() -> list[SimData]:
+    # pymodbus needs a non-empty coil/discrete-input block; the action refuses every access.
+    return [SimData(0, count=16, values=False, datatype=DataType.BITS)]
+
+
+class _Binding:
+    """Connects one ``SimArray`` to its pymodbus ``SimDevice`` registers."""
+
+    def __init__(self, array: SimArray) -> None:
+        self.array = array
+        self._input_image: list[int] | None = None
+        pitch_um = round(array.layout.pitch_mm * 1000.0)
+        holding, inputs = _register_blocks(array.n_channels, array.layout.columns, pitch_um)
+        self.device = SimDevice(
+            id=array.device_id,
+            simdata=(_bit_block(), _bit_block(), holding, inputs),
+            action=self.action,
+        )
+
+    async def action(
+        self,
+        function_code: int,
+        start_address: int,
+        address: int,
+        count: int,
+        registers: list[int],
+        set_values: list[int] | list[bool] | None,
+    ) -> ExcCodes | None:
+        """Refresh the accessed block from the array; validate and apply writes."""
+        if function_code in _BIT_FUNCTIONS:
+            return ExcCodes.ILLEGAL_ADDRESS
+        if function_code in _INPUT_FUNCTIONS:
+            image = self.array.input_registers()
+            if image is not self._input_image:
+                registers[-start_address : len(image) - start_address] = image
+                self._input_image = image
+            return None
+        if set_values:
+            try:
+                self.array.write_holding(address, [int(v) for v in set_values])
+            except reg.RegisterWriteError as exc:
+                return ExcCodes(exc.code)
+            return None
+        image = self.array.holding_registers()
+        registers[-start_address : len(image) - start_address] = image
+        return None
+
+
+def static_device(n_channels: int, device_id: int = 1, columns: int = 4) -> SimDevice:
+    """A plain pymodbus device with the same register layout and static values (a baseline)."""
+    holding, inputs = _register_blocks(n_channels, columns, 2500)
+    return SimDevice(id=device_id, simdata=(_bit_block(), _bit_block(), holding, inputs))
+
+
+# -------------------------------------------------------------------------- handler
+@dataclass(frozen=True)
+class LineTiming:
+    """RTU line emulation: baud rate and the device's turnaround time."""
+
+    baudrate: int
+    turnaround_s: float = 0.0
+
+    def transaction_s(self, request_bytes: int, response_bytes: int) -> float:
+        """Wire time of a request and its response, with the silent interval after each."""
+        chars = request_bytes + response_bytes + 2 * FRAME_GAP_CHARS
+        return chars * BITS_PER_CHAR / self.baudrate + self.turnaround_s
+
+
+class _Identity:
+    """Stands in for pymodbus' global control block: one identity per device."""
+
+    def __init__(self, info: dict[str, str]) -> None:
+        self.Identity = ModbusDeviceIdentification(info_name=info)
+
+
+class _SimHandler(ServerRequestHandler):
+    """Connection handler: per-device identity, fault injection, line timing."""
+
+    def __init__(self, owner: Any) -> None:
+        super().__init__(owner, owner.trace_packet, owner.trace_pdu, owner.trace_connect)
+        self._timers: dict[int, asyncio.TimerHandle] = {}
+        self._next_timer = 0
+        self._arrival_s = 0.0
+        self._decision: FaultDecision = NO_FAULT
+        self._request_bytes = 0
+
+    def callback_data(self, data: bytes, addr: tuple[Any, ...] | None = None) -> int:
+        self._arrival_s = self.loop.time()
+        used: int = super().callback_data(data, addr)
+        return used
+
+    def callback_disconnected(self, exc: Exception | None) -> None:
+        self.cancel_pending()
+        super().callback_disconnected(exc)
+
+    def cancel_pending(self) -> None:
+        """Drop responses still held back (the connection is going away)."""
+        for handle in self._timers.values():
+            handle.cancel()
+        self._timers.clear()
+
+    async def handle_request(self) -> None:
+        pdu: ModbusPDU | None = self.last_pdu
+        if pdu is None:
+            return
+        owner = self.server
+        array: SimArray | None = owner.sim_arrays.get(pdu.dev_id)
+        addr = self.last_addr
+        if array is None:
+            if not owner.sim_bus:
+                self._reply(ExceptionResponse(pdu.function_code, ExcCodes.GATEWAY_NO_RESPONSE), pdu, addr)
+            return
+        decision = array.faults.decide(array.device_time_s)
+        if decision.drop_connection and not owner.sim_serial:
+            if self.transport:
+                self.transport.abort()  # type: ignore[attr-defined]
+            return
+        if decision.no_response or decision.drop_connection:
+            return
+        self._decision = decision
+        if owner.sim_line is not None:
+            self._request_bytes = len(self.framer.buildFrame(pdu))
+        try:
+            if decision.exception_code is not None:
+                self._reply(ExceptionResponse(pdu.function_code, decision.exception_code), pdu, addr)
+            elif isinstance(pdu, ReadDeviceInformationRequest):
+                self._reply(self._identity_response(pdu, array), pdu, addr)
+            else:
+                await super().handle_request()
+        finally:
+            self._decision = NO_FAULT
+
+    def _reply(self, response: ModbusPDU, request: ModbusPDU, addr: tuple[Any, ...] | None) -> None:
+        response.transaction_id = request.transaction_id
+        response.dev_id = request.dev_id
+        self.server_send(response, addr)
+
+    @staticmethod
+    def _identity_response(pdu: ReadDeviceInformationRequest, array: SimArray) -> ModbusPDU:
+        if not (0 <= pdu.object_id <= 0xFF and 0 <= pdu.read_code <= 0x04):
+            return ExceptionResponse(pdu.function_code, ExcCodes.ILLEGAL_VALUE)
+        information = DeviceInformationFactory.get(_Identity(array.identity()), pdu.read_code, pdu.object_id)
+        if pdu.read_code == DeviceInformation.SPECIFIC and (
+            0x07 <= pdu.object_id < 0x80 or not information.get(pdu.object_id)
+        ):
+            return ExceptionResponse(pdu.function_code, ExcCodes.ILLEGAL_ADDRESS)
+        return ReadDeviceInformationResponse(read_code=pdu.read_code, information=information)
+
+    def server_send(self, pdu: ModbusPDU | None, addr: tuple[Any, ...] | None) -> None:
+        if not pdu:
+            return
+        decision = self._decision
+        line: LineTiming | None = self.server.sim_line
+        if decision is NO_FAULT and line is None:
+            super().server_send(pdu, addr)
+            return
+        packet: bytes = self.trace_packet(True, self.framer.buildFrame(self.trace_pdu(True, pdu)))
+        if decision.garble:
+            packet = _garble(packet, isinstance(self.framer, FramerRTU))
+        delay = decision.delay_s
+        if line is not None:
+            delay += line.transaction_s(self._request_bytes, len(packet))
+        delay -= self.loop.time() - self._arrival_s
+        if delay <= 0.0:
+            self.send(packet, addr)
+            return
+        key = self._next_timer
+        self._next_timer += 1
+        self._timers[key] = self.loop.call_later(delay, self._send_later, key, packet, addr)
+
+    def _send_later(self, key: int, packet: bytes, addr: tuple[Any, ...] | None) -> None:
+        self._timers.pop(key, None)
+        if self.transport and not self.is_closing:
+            self.send(packet, addr)
+
+
+def _garble(packet: bytes, rtu: bool) -> bytes:
+    """Corrupt a response: RTU gets a wrong CRC, Modbus/TCP a non-zero protocol id."""
+    if rtu:
+        return packet[:-1] + bytes([packet[-1] ^ 0xA5])
+    return packet[:2] + b"\x00\x01" + packet[4:]
+
+
+class _SimServerMixin:
+    sim_arrays: dict[int, SimArray]
+    sim_bus: bool
+    sim_serial: bool
+    sim_line: LineTiming | None
+
+    def callback_new_connection(self) -> _SimHandler:
+        return _SimHandler(self)
+
+
+class _TcpServer(_SimServerMixin, ModbusTcpServer):
+    pass
+
+
+class _TlsServer(_SimServerMixin, ModbusTlsServer):
+    pass
+
+
+class _SerialServer(_SimServerMixin, ModbusSerialServer):
+    pass
+
+
+# --------------------------------------------------------------------------- servers
+class SimServer:
+    """A running server: ``port`` (TCP/TLS, the real bound port), ``device`` (serial)."""
+
+    def __init__(
+        self, server: Any, arrays: Sequence[SimArray], kind: str, host: str, port: int, device: str
+    ) -> None:
+        self._server = server
+        self.arrays = list(arrays)
+        self.kind = kind
+        self.host = host
+        self.port = port
+        self.device = device
+        self._ticker: asyncio.Task[None] | None = None
+
+    def array(self, device_id: int) -> SimArray:
+        for a in self.arrays:
+            if a.device_id == device_id:
+                return a
+        raise KeyError(f"no array with device id {device_id}")
+
+    def start_ticker(self, tick_s: float) -> None:
+        """Advance every array every ``tick_s`` wall seconds (feeds recorders and fault schedules).
+
+        Without it (``tick_s=None`` in ``serve_*``) the physics advances only when registers are read.
+        """
+
+        async def tick() -> None:
+            while True:
+                await asyncio.sleep(tick_s)
+                for a in self.arrays:
+                    a.advance()
+                    a.faults.apply_due(a.device_time_s)
+
+        self._ticker = asyncio.get_running_loop().create_task(tick(), name="sim_device ticker")
+
+    async def stop(self) -> None:
+        """Stop serving: close the listener and every connection, cancel pending work."""
+        if self._ticker is not None:
+            self._ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._ticker
+            self._ticker = None
+        server = self._server
+        listener = server.transport
+        for handler in list(server.active_connections.values()):
+            handler.cancel_pending()
+            if handler.transport is not None and self.kind != "serial":
+                handler.transport.abort()
+        await server.shutdown()
+        if isinstance(listener, asyncio.AbstractServer):
+            await asyncio.wait_for(listener.wait_closed(), timeout=5.0)
+        for _ in range(3):
+            await asyncio.sleep(0)
+
+
+def _prepare(arrays: SimArray | Sequence[SimArray]) -> tuple[list[SimArray], list[SimDevice]]:
+    items = [arrays] if isinstance(arrays, SimArray) else list(arrays)
+    if not items:
+        raise ValueError("at least one SimArray is needed")
+    ids = [a.device_id for a in items]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"device ids must be unique, got {ids}")
+    return items, [_Binding(a).device for a in items]
+
+
+def _configure(server: Any, arrays: list[SimArray], bus: bool, serial: bool, line: LineTiming | None) -> None:
+    server.sim_arrays = {a.device_id: a for a in arrays}
+    server.sim_bus = bus
+    server.sim_serial = serial
+    server.sim_line = line
+
+
+async def _start(server: Any, what: str) -> None:
+    try:
+        await server.serve_forever(background=True)
+    except RuntimeError as exc:
+        await server.shutdown()
+        raise ServerStartError(
+            f"cannot start the Modbus server on {what} (address in use, not available, or not permitted)"
+        ) from exc
+
+
+@contextlib.asynccontextmanager
+async def serve_tcp(
+    arrays: SimArray | Sequence[SimArray],
+    host: str = "127.0.0.1",
+    port: int = 0,
+    framer: str = "socket",
+    *,
+    tick_s: float | None = 0.25,
+) -> AsyncIterator[SimServer]:
+    """Serve arrays over Modbus TCP (``framer="socket"``) or RTU framing over TCP (``"rtu"``)."""
+    if framer not in ("socket", "rtu"):
+        raise ValueError(f'framer must be "socket" or "rtu", got {framer!r}')
+    items, devices = _prepare(arrays)
+    server = _TcpServer(devices, framer=FramerType(framer), address=(host, port))
+    _configure(server, items, framer == "rtu", False, None)
+    await _start(server, f"{host}:{port}")
+    bound = server.transport.sockets[0].getsockname()[1]  # type: ignore[attr-defined]
+    sim = SimServer(server, items, "rtu-tcp" if framer == "rtu" else "tcp", host, int(bound), "")
+    if tick_s is not None:
+        sim.start_ticker(tick_s)
+    try:
+        yield sim
+    finally:
+        await sim.stop()
+
+
+@contextlib.asynccontextmanager
+async def serve_tls(
+    arrays: SimArray | Sequence[SimArray],
+    host: str = "127.0.0.1",
+    port: int = 0,
+    *,
+    certfile: str,
+    keyfile: str,
+    password: str | None = None,
+    tick_s: float | None = 0.25,
+) -> AsyncIterator[SimServer]:
+    """Serve arrays over Modbus/TCP security (TLS) with the given certificate and key."""
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    try:
+        context.load_cert_chain(certfile=certfile, keyfile=keyfile, password=password)
+    except (OSError, ssl.SSLError) as exc:
+        raise ServerStartError(f"cannot load TLS certificate {certfile!r} / key {keyfile!r}: {exc}") from exc
+    items, devices = _prepare(arrays)
+    server = _TlsServer(devices, address=(host, port), sslctx=context)
+    _configure(server, items, False, False, None)
+    await _start(server, f"{host}:{port} (TLS)")
+    bound = server.transport.sockets[0].getsockname()[1]  # type: ignore[attr-defined]
+    sim = SimServer(server, items, "tls", host, int(bound), "")
+    if tick_s is not None:
+        sim.start_ticker(tick_s)
+    try:
+        yield sim
+    finally:
+        await sim.stop()
+
+
+def _check_serial_device(port: str) -> None:
+    """A plain device path must exist (pyserial URLs such as socket://host:port are passed on)."""
+    if "://" not in port and not os.path.exists(port):
+        raise ServerStartError(f"serial device {port} does not exist")
+
+
+@contextlib.asynccontextmanager
+async def serve_serial(
+    arrays: SimArray | Sequence[SimArray],
+    port: str,
+    baudrate: int = 115200,
+    line_timing: bool = True,
+    turnaround_s: float = 0.0,
+    *,
+    bytesize: int = 8,
+    parity: str = "N",
+    stopbits: int = 1,
+    tick_s: float | None = 0.25,
+) -> AsyncIterator[SimServer]:
+    """Serve arrays as RTU devices on one serial line (``port`` is the device path)."""
+    if not (isinstance(baudrate, int) and baudrate > 0):
+        raise ValueError(f"baudrate must be a positive integer, got {baudrate!r}")
+    if not turnaround_s >= 0.0:
+        raise ValueError(f"turnaround_s must be >= 0, got {turnaround_s!r}")
+    _check_serial_device(port)
+    items, devices = _prepare(arrays)
+    server = _SerialServer(
+        devices,
+        framer=FramerType.RTU,
+        port=port,
+        baudrate=baudrate,
+        bytesize=bytesize,
+        parity=parity,
+        stopbits=stopbits,
+    )
+    _configure(server, items, True, True, LineTiming(baudrate, turnaround_s) if line_timing else None)
+    await _start(server, f"serial device {port}")
+    sim = SimServer(server, items, "serial", "", 0, port)
+    if tick_s is not None:
+        sim.start_ticker(tick_s)
+    try:
+        yield sim
+    finally:
+        await sim.stop()
+
+
+@contextlib.asynccontextmanager
+async def serve_static_tcp(
+    n_channels: int, host: str = "127.0.0.1", port: int = 0, device_id: int = 1
+) -> AsyncIterator[int]:
+    """A bare pymodbus server with the same register layout and static values; yields the port."""
+    server = ModbusTcpServer(static_device(n_channels, device_id), address=(host, port))
+    await _start(server, f"{host}:{port}")
+    listener = server.transport
+    try:
+        yield int(listener.sockets[0].getsockname()[1])  # type: ignore[attr-defined]
+    finally:
+        for handler in list(server.active_connections.values()):
+            if handler.transport is not None:
+                handler.transport.abort()  # type: ignore[attr-defined]
+        await server.shutdown()
+        if isinstance(listener, asyncio.AbstractServer):
+            await asyncio.wait_for(listener.wait_closed(), timeout=5.0)
+        for _ in range(3):
+            await asyncio.sleep(0)
