@@ -305,7 +305,10 @@ class SimArray:
         modes = self._mode_series(times)
         breakdown, self._state = self._model.simulate(force, times, self._state, t0_s=self._last_t)
         true_r = self._world.apply(breakdown, force, temperature, dt_s)
-        counts = self._convert(true_r, modes)
+        sensed_r = true_r
+        if self.config.sensor_noise_rel > 0.0:
+            sensed_r = true_r * np.exp(self.config.sensor_noise_rel * self._rng.standard_normal(true_r.shape))
+        counts = self._convert(sensed_r, modes)
         measured, _status = self._divider.resistance(counts)
         self._counter += conversions
         self._last_t = float(times[-1])

@@ -131,6 +131,13 @@ def scenarios_cmd() -> None:
 @click.option("--world-effects", default="", help=f"Comma-separated: {', '.join(WORLD_EFFECTS)}.")
 @click.option("--no-spread", is_flag=True, help="Identical channels (no part-to-part spread).")
 @click.option("--noise-lsb", type=float, default=2.0, show_default=True, help="ADC noise, LSB RMS.")
+@click.option(
+    "--sensor-noise",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Sensor resistance noise, relative RMS.",
+)
 @click.option("--sample-period", type=float, default=0.01, show_default=True, help="ADC sample period, s.")
 @click.option(
     "--record", "record_path", type=click.Path(dir_okay=False), help="Write a measurement record CSV."
@@ -159,6 +166,7 @@ def run_cmd(
     world_effects: str,
     no_spread: bool,
     noise_lsb: float,
+    sensor_noise: float,
     sample_period: float,
     record_path: str | None,
     record_period: float,
@@ -184,6 +192,7 @@ def run_cmd(
             scenario="idle",
             speed=speed,
             noise_lsb_rms=noise_lsb,
+            sensor_noise_rel=sensor_noise,
             world_effects=effects,
             param_spread=not no_spread,
             sample_period_s=sample_period,

@@ -114,6 +114,9 @@ class ArrayConfig:
     scenario: str | Scenario = "idle"
     speed: float = 1.0
     noise_lsb_rms: float = 2.0
+    #: relative RMS of log-normal noise on the sensor's own resistance (contact and
+    #: tunneling fluctuations), applied before the divider; 0.01 is 1 % resistance noise
+    sensor_noise_rel: float = 0.0
     world_effects: tuple[str, ...] = ()
     param_spread: bool | Mapping[str, float] = True
     channel_params: SensorParams | Sequence[SensorParams] | None = None
@@ -143,6 +146,12 @@ class ArrayConfig:
             raise ConfigError(
                 f"pitch_mm = {self.pitch_mm!r} must be within 0.001..65.535 mm (register pitch_um)"
             )
+        if not (
+            isinstance(self.sensor_noise_rel, int | float)
+            and math.isfinite(self.sensor_noise_rel)
+            and 0.0 <= self.sensor_noise_rel <= 0.5
+        ):
+            raise ConfigError(f"sensor_noise_rel = {self.sensor_noise_rel!r} must be in [0, 0.5]")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError(f"seed = {self.seed!r} must be an integer >= 0")
         if not (

@@ -275,3 +275,30 @@ def test_identity_and_config_errors() -> None:
     with pytest.raises(ValueError, match="device_id"):
         SimArray(ArrayConfig(), device_id=0)
     assert ArrayConfig(world_effects="creep,creep2").world_effects == ("creep2",)  # type: ignore[arg-type]
+
+
+def test_sensor_noise_is_relative_and_log_normal() -> None:
+    import numpy as np
+
+    from sim_device import ArrayConfig
+    from sim_device.record import record_offline
+
+    cfg = ArrayConfig(
+        channels=1, columns=1, scenario="holds", noise_lsb_rms=0.0, sensor_noise_rel=0.01, param_spread=False
+    )
+    rec = record_offline(cfg, duration_s=200.0, record_period_s=0.5)
+    loaded = (rec.force_n > 0) & np.isfinite(rec.resistance_ohm)
+    clean = record_offline(cfg.with_changes(sensor_noise_rel=0.0), duration_s=200.0, record_period_s=0.5)
+    ratio = np.log(rec.resistance_ohm[loaded] / clean.resistance_ohm[loaded])
+    assert 0.008 < float(np.std(ratio)) < 0.012
+    assert abs(float(np.mean(ratio))) < 0.003
+
+
+def test_sensor_noise_is_validated() -> None:
+    import pytest
+
+    from sim_device import ArrayConfig
+    from sim_device.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"sensor_noise_rel = 0.9 must be in \[0, 0.5\]"):
+        ArrayConfig(sensor_noise_rel=0.9)
