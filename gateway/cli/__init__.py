@@ -8,6 +8,7 @@ from .calibrate_cmd import calibrate_cmd
 from .config_cmd import channels, check_config
 from .discrepancy_cmd import discrepancy_cmd
 from .model_cmd import model
+from .run_cmd import demo, poll_once, run
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -21,5 +22,8 @@ main.add_command(check_config)
 main.add_command(channels)
 main.add_command(calibrate_cmd)
 main.add_command(discrepancy_cmd)
+main.add_command(run)
+main.add_command(poll_once)
+main.add_command(demo)
 
 __all__ = ["main"]

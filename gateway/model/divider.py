@@ -85,9 +85,9 @@ class Divider:
         r = self.reference_ohm * (fs / safe - 1.0)
         r = np.where(open_, np.inf, np.where(short, 0.0, np.where(invalid, np.nan, r)))
         status = np.zeros(c.shape, dtype=np.int8)
-        status[open_] = DividerStatus.OPEN
-        status[short] = DividerStatus.SHORT
-        status[invalid] = DividerStatus.INVALID
+        status[open_] = int(DividerStatus.OPEN)
+        status[short] = int(DividerStatus.SHORT)
+        status[invalid] = int(DividerStatus.INVALID)
         return np.asarray(r, dtype=np.float64), status
 
 

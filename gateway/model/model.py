@@ -36,7 +36,7 @@ from .physics import contact_coefficient_ohm_sqrt_n, interparticle_separation_m,
 FloatArray = NDArray[np.float64]
 StatusArray = NDArray[np.int8]
 
-_NEWTON_TOL_LOG = 1e-13
+_NEWTON_STOP_STEP = 1e-5  # in ln F; quadratic convergence leaves an error of ~1e-10
 _NEWTON_MAX_ITER = 60
 #: Dead band of the hysteresis play operator, as a fraction of ``hysteresis_force_n``.
 HYSTERESIS_DEAD_BAND = 0.1
@@ -51,6 +51,14 @@ class ForceStatus(enum.IntEnum):
     NO_CONTACT = 1  # resistance at or above R(force_min): reads 0 N
     SATURATED = 2  # resistance at or below R(force_max): reads force_max
     INVALID = 3  # NaN, zero, negative or infinite resistance: reads NaN, never exported
+
+
+# plain ints for the hot path (numpy probes an enum member's attributes on every use)
+_NO_CONTACT, _SATURATED, _INVALID = (
+    int(ForceStatus.NO_CONTACT),
+    int(ForceStatus.SATURATED),
+    int(ForceStatus.INVALID),
+)
 
 
 @dataclass(frozen=True)
@@ -378,7 +386,7 @@ class SensorModel:
         """
         relaxed = self.relax(state, dt_s)
         inv = self.invert(resistance_ohm, relaxed, temperature_c, guess_n=np.maximum(state.last_force_n, 0.0))
-        held = np.where(inv.status == ForceStatus.INVALID, relaxed.last_force_n, inv.force_n)
+        held = np.where(inv.status == _INVALID, relaxed.last_force_n, inv.force_n)
         return inv, self.record(relaxed, held)
 
     def track_series(
@@ -441,37 +449,40 @@ class SensorModel:
         guess_n: ArrayLike | None,
     ) -> Inversion:
         p = self.params
-        shape = np.broadcast_shapes(r_meas.shape, p.r0_ohm.shape, np.shape(state_strain))
-        r_meas = np.broadcast_to(r_meas, shape)
-        fmin = np.broadcast_to(p.force_min_n, shape)
-        fmax = np.broadcast_to(p.force_max_n, shape)
+        strain = np.asarray(state_strain, dtype=np.float64)
+        shape = r_meas.shape
+        if shape != p.r0_ohm.shape or strain.shape not in ((), shape):
+            shape = np.broadcast_shapes(r_meas.shape, p.r0_ohm.shape, strain.shape)
+            r_meas = np.broadcast_to(r_meas, shape)
+            fmin = np.broadcast_to(p.force_min_n, shape)
+            fmax = np.broadcast_to(p.force_max_n, shape)
+        else:  # one sample per channel: the polling path, kept free of broadcasting copies
+            fmin, fmax = p.force_min_n, p.force_max_n
         r0t = np.asarray(temp_factor) * p.r0_ohm
-        ends = self._total_ohm(np.stack([fmin, fmax]), np.asarray(state_strain), r0t)
+        ends = self._total_ohm(np.stack([fmin, fmax]), strain, r0t)
         r_at_min, r_at_max = ends[0], ends[1]
         with np.errstate(invalid="ignore"):
             open_contact = np.isposinf(r_meas) & self._open_at_rest
-            invalid = (~np.isfinite(r_meas) | ~(r_meas > 0.0)) & ~open_contact
+            invalid = ~(np.isfinite(r_meas) & (r_meas > 0.0)) & ~open_contact
             no_contact = ~invalid & (r_meas >= r_at_min)
             saturated = ~invalid & ~no_contact & (r_meas <= r_at_max)
         solve = ~(invalid | no_contact | saturated)
-        status = np.zeros(shape, dtype=np.int8)
-        status[no_contact] = ForceStatus.NO_CONTACT
-        status[saturated] = ForceStatus.SATURATED
-        status[invalid] = ForceStatus.INVALID
-        force = np.where(saturated, fmax, 0.0)
-        force = np.where(invalid, np.nan, force)
+        status = (
+            no_contact * np.int8(_NO_CONTACT) + saturated * np.int8(_SATURATED) + invalid * np.int8(_INVALID)
+        ).astype(np.int8)
+        force = np.where(invalid, np.nan, np.where(saturated, fmax, 0.0))
         if solve.any():
             target = np.log(np.where(solve, r_meas, r_at_min))
-            lo, hi = np.log(fmin), np.log(fmax)
+            lo, hi = np.log(fmin) + np.zeros(shape), np.log(fmax) + np.zeros(shape)
             if guess_n is None:
                 # straight line between the range ends in (ln F, ln R)
                 lr_min, lr_max = np.log(r_at_min), np.log(np.where(r_at_max > 0, r_at_max, 1e-300))
                 frac = np.clip((lr_min - target) / np.where(lr_min > lr_max, lr_min - lr_max, 1.0), 0.0, 1.0)
                 u = lo + frac * (hi - lo)
             else:
-                g = np.broadcast_to(np.asarray(guess_n, dtype=np.float64), shape)
-                u = np.log(np.clip(np.where(np.isfinite(g), g, fmin), fmin, fmax))
-            u = self._newton(u, lo.copy(), hi.copy(), target, np.asarray(state_strain), r0t)
+                g = np.asarray(guess_n, dtype=np.float64)
+                u = np.log(np.clip(np.where(np.isfinite(g), g, fmin), fmin, fmax)) + np.zeros(shape)
+            u = self._newton(u, lo, hi, target, strain, r0t)
             force = np.where(solve, np.exp(u), force)
         return Inversion(np.asarray(force, dtype=np.float64), status)
 
@@ -517,11 +528,11 @@ class SensorModel:
             step = g / slope
             new = u - step
             outside = ~((new >= lo) & (new <= hi))
-            new = np.where(outside, 0.5 * (lo + hi), new)
-            done = float(np.max(np.abs(new - u), initial=0.0)) < _NEWTON_TOL_LOG
-            u = new
-            if done:
-                break
+            largest = float(np.max(np.abs(step), initial=0.0))
+            if largest < _NEWTON_STOP_STEP and not outside.any():
+                # quadratic convergence: the error after a step this small is far below 1e-12
+                return new
+            u = np.where(outside, 0.5 * (lo + hi), new)
         return u
 
 
@@ -538,7 +549,7 @@ def _parallel(a: ArrayLike, b: ArrayLike) -> FloatArray:
 def _hold_invalid(inv: Inversion, last_force_n: FloatArray) -> FloatArray:
     """Forces used to advance the state: invalid samples hold the last valid force."""
     f = inv.force_n
-    bad = inv.status == ForceStatus.INVALID
+    bad = inv.status == _INVALID
     if not bad.any():
         return f
     n_t = f.shape[0]

@@ -26,7 +26,9 @@ def test_forward_then_inverse_over_range_and_creep_states(
     p = WIDE
     # any reachable Kelvin strain: between relaxed and fully crept at the top force
     kv_max = p.force_max_n / (p.area_m2 * (p.e1_pa + p.e1_slope_pa_per_n * p.force_max_n))
-    state = ModelState(np.array([creep_fraction * kv_max]), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1))
+    state = ModelState(
+        np.array([creep_fraction * kv_max]), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1)
+    )
     r = m.resistance(np.array([force_n]), state)
     inv = m.invert(r, state)
     assert inv.status[0] == ForceStatus.OK

@@ -1,0 +1,436 @@
+"""``tactile-gateway run | poll-once | demo``: the gateway's long-running and one-shot commands.
+
+* ``run -c FILE``: poll every bus and serve ``/metrics``. SIGHUP reloads the file (channels
+  whose physics is unchanged keep their creep state; a bad file is logged and the old
+  configuration stays), SIGTERM/SIGINT stop cleanly. A bad file at start exits with 2.
+* ``poll-once -c FILE [--json]``: one poll of every device, printed as a table or JSON;
+  exit 1 if a device could not be read.
+* ``demo``: a simulated 4x4 array in this process, the gateway polling it over loopback
+  Modbus TCP, metrics on 127.0.0.1:9830 and a live terminal view of the forces.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import math
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, TextIO
+
+import click
+from prometheus_client import CollectorRegistry
+
+from ..config import (
+    BusConfig,
+    ChannelConfig,
+    DeviceConfig,
+    GatewayConfig,
+    MetricsConfig,
+    RegisterMap,
+    TlsConfig,
+    load_config,
+)
+from ..errors import ConfigError
+from ..exporter import MetricsServer, WebConfig, load_web_config, make_registry
+from ..model import PAPER_EFFECTS, Divider, SensorParams
+from ..pipeline import ChannelStatus, DeviceSnapshot, GatewaySnapshot
+from ..poller import Poller, SnapshotHolder
+
+log = logging.getLogger("gateway.run")
+
+EXIT_CONFIG = 2
+EXIT_UNREACHABLE = 1
+
+
+# --------------------------------------------------------------------------- config builders
+def device_config_for(
+    name: str,
+    device_id: int,
+    params: Sequence[SensorParams],
+    columns: int,
+    pitch_mm: float,
+    *,
+    encoding: str = "adc",
+    divider: Divider | None = None,
+    effects: tuple[str, ...] = PAPER_EFFECTS,
+    registers: RegisterMap | None = None,
+    allow_write: bool = False,
+) -> DeviceConfig:
+    """A device of ``len(params)`` channels laid out row-major (``x = (i % columns) * pitch``).
+
+    Used by ``demo`` to describe the simulated array it starts (its true parameters), and by
+    tests and benchmarks that do the same.
+    """
+    channels = tuple(
+        ChannelConfig(
+            index=i,
+            name=f"ch{i:02d}",
+            x_mm=float((i % columns) * pitch_mm),
+            y_mm=float((i // columns) * pitch_mm),
+            enabled=True,
+            effects=tuple(effects),
+            params=p,
+        )
+        for i, p in enumerate(params)
+    )
+    return DeviceConfig(
+        name=name,
+        device_id=device_id,
+        encoding=encoding,
+        n_channels=len(channels),
+        registers=registers or RegisterMap(),
+        divider=divider or Divider(),
+        channels=channels,
+        allow_write=allow_write,
+        columns=columns,
+        pitch_mm=float(pitch_mm),
+        calibration=None,
+    )
+
+
+def bus_config_for(
+    name: str,
+    kind: str,
+    devices: Sequence[DeviceConfig],
+    *,
+    host: str | None = None,
+    port: int | None = None,
+    serial_port: str | None = None,
+    baudrate: int = 115200,
+    tls: TlsConfig | None = None,
+    timeout_s: float = 0.5,
+    retries: int = 1,
+    poll_interval_s: float = 0.1,
+    max_read_registers: int = 125,
+    backoff_initial_s: float = 0.1,
+    backoff_max_s: float = 2.0,
+) -> BusConfig:
+    """A bus with the given devices (see ``BusConfig`` for the fields)."""
+    return BusConfig(
+        name=name,
+        kind=kind,
+        host=host,
+        port=port,
+        serial_port=serial_port,
+        baudrate=baudrate,
+        parity="N",
+        stopbits=1,
+        bytesize=8,
+        tls=tls,
+        timeout_s=timeout_s,
+        retries=retries,
+        poll_interval_s=poll_interval_s,
+        max_read_registers=max_read_registers,
+        backoff_initial_s=backoff_initial_s,
+        backoff_max_s=backoff_max_s,
+        devices=tuple(devices),
+    )
+
+
+def gateway_config_for(
+    buses: Sequence[BusConfig], host: str = "127.0.0.1", port: int = 9830
+) -> GatewayConfig:
+    return GatewayConfig(metrics=MetricsConfig(host=host, port=port), buses=tuple(buses), source=None)
+
+
+# --------------------------------------------------------------------------- helpers
+def _setup_logging(level: str) -> None:
+    logging.basicConfig(
+        level=getattr(logging, level.upper()),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its errors are reported as ours
+
+
+def _load(path: Path) -> tuple[GatewayConfig, WebConfig | None]:
+    config = load_config(path)
+    web = load_web_config(config.metrics.web_config) if config.metrics.web_config else None
+    return config, web
+
+
+_log_level = click.option(
+    "--log-level",
+    type=click.Choice(["debug", "info", "warning", "error"]),
+    default="info",
+    show_default=True,
+    help="log messages from this level up (to stderr)",
+)
+_config_option = click.option(
+    "-c",
+    "--config",
+    "config_path",
+    required=True,
+    type=click.Path(path_type=Path, dir_okay=False),
+    help="gateway configuration file (TOML)",
+)
+
+
+# --------------------------------------------------------------------------- run
+async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None) -> int:
+    """Poll and serve until SIGTERM/SIGINT; SIGHUP reloads ``config_path``."""
+    holder = SnapshotHolder()
+    registry = make_registry(holder.get, CollectorRegistry(auto_describe=False))
+    try:
+        server = MetricsServer(registry, config.metrics.host, config.metrics.port, web).start()
+    except OSError as exc:
+        log.error("cannot serve metrics on %s:%s: %s", config.metrics.host, config.metrics.port, exc)
+        return EXIT_CONFIG
+    poller = Poller(config, holder)
+    commands: asyncio.Queue[str] = asyncio.Queue()
+    loop = asyncio.get_running_loop()
+    handled = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+    for sig in handled:
+        loop.add_signal_handler(sig, commands.put_nowait, "reload" if sig == signal.SIGHUP else "stop")
+    await poller.start()
+    log.info("polling %d bus(es); metrics on %s", len(config.buses), server.url)
+    try:
+        while (command := await commands.get()) != "stop":
+            try:
+                new_config, new_web = _load(config_path)
+            except (ConfigError, OSError) as exc:
+                log.error("reload failed, keeping the running configuration: %s", exc)
+                continue
+            report = await poller.reload(new_config)
+            log.info(
+                "reloaded %s (%s): %d channels keep their creep state, %d reset",
+                config_path,
+                command,
+                report.channels_kept,
+                report.channels_reset,
+            )
+            if new_config.metrics != config.metrics or new_web != web:
+                server = _restart_server(server, registry, new_config.metrics, new_web)
+            config, web = new_config, new_web
+    finally:
+        for sig in handled:
+            loop.remove_signal_handler(sig)
+        await poller.stop()
+        server.stop()
+        log.info("stopped")
+    return 0
+
+
+def _restart_server(
+    old: MetricsServer, registry: CollectorRegistry, metrics: MetricsConfig, web: WebConfig | None
+) -> MetricsServer:
+    old.stop()
+    try:
+        return MetricsServer(registry, metrics.host, metrics.port, web).start()
+    except OSError as exc:
+        log.error(
+            "cannot serve metrics on %s:%s (%s); keeping the old endpoint", metrics.host, metrics.port, exc
+        )
+        return MetricsServer(registry, old.host, old.port, old.web_config).start()
+
+
+@click.command("run")
+@_config_option
+@_log_level
+def run(config_path: Path, log_level: str) -> None:
+    """Poll the configured buses and serve Prometheus metrics until stopped.
+
+    SIGHUP reloads the configuration file; SIGTERM or SIGINT stop cleanly.
+    """
+    _setup_logging(log_level)
+    try:
+        config, web = _load(config_path)
+    except (ConfigError, OSError) as exc:
+        click.echo(f"tactile-gateway: {exc}", err=True)
+        sys.exit(EXIT_CONFIG)
+    sys.exit(asyncio.run(serve(config_path, config, web)))
+
+
+# --------------------------------------------------------------------------- poll-once
+def _num(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else round(float(x), 6)
+
+
+def snapshot_json(snap: GatewaySnapshot) -> dict[str, Any]:
+    """A JSON-ready view of a snapshot (absent values are null, never NaN)."""
+    devices = []
+    for name in sorted(snap.devices):
+        dev = snap.devices[name]
+        cop = dev.center_of_pressure_mm
+        devices.append(
+            {
+                "device": name,
+                "bus": dev.bus,
+                "up": dev.up,
+                "error": dev.error,
+                "total_force_n": _num(dev.total_force_n),
+                "center_of_pressure_mm": None if cop is None else [_num(cop[0]), _num(cop[1])],
+                "channels_in_contact": dev.channels_in_contact,
+                "contact_area_mm2": _num(dev.contact_area_mm2),
+                "peak_channel": dev.peak_channel,
+                "channels": [
+                    {
+                        "index": c.index,
+                        "name": c.name,
+                        "x_mm": c.x_mm,
+                        "y_mm": c.y_mm,
+                        "status": c.status.label,
+                        "resistance_ohm": _num(c.resistance_ohm),
+                        "force_n": _num(c.force_n),
+                        "force_static_n": _num(c.force_static_n),
+                    }
+                    for c in dev.channels()
+                ],
+            }
+        )
+    return {"devices": devices}
+
+
+def _fmt(x: float | None, spec: str) -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def snapshot_table(snap: GatewaySnapshot) -> str:
+    lines = []
+    for name in sorted(snap.devices):
+        dev = snap.devices[name]
+        state = "up" if dev.up else f"DOWN ({dev.error})"
+        lines.append(f"device {name} on bus {dev.bus}: {state}")
+        lines.append(
+            f"  {'channel':<10} {'status':<11} {'resistance_ohm':>15} {'force_n':>9} {'static_n':>9}"
+        )
+        for c in dev.channels():
+            lines.append(
+                f"  {c.name:<10} {c.status.label:<11} {_fmt(c.resistance_ohm, '15.1f')} "
+                f"{_fmt(c.force_n, '9.3f')} {_fmt(c.force_static_n, '9.3f')}"
+            )
+        cop = dev.center_of_pressure_mm
+        where = "-" if cop is None else f"({cop[0]:.2f}, {cop[1]:.2f}) mm"
+        lines.append(
+            f"  total {dev.total_force_n:.3f} N, centre of pressure {where}, "
+            f"{dev.channels_in_contact} in contact ({dev.contact_area_mm2:.2f} mm^2)"
+        )
+    return "\n".join(lines)
+
+
+@click.command("poll-once")
+@_config_option
+@click.option("--json", "as_json", is_flag=True, help="print JSON instead of a table")
+@_log_level
+def poll_once(config_path: Path, as_json: bool, log_level: str) -> None:
+    """Poll every device once and print resistance, force and status of each channel.
+
+    Exit status 1 if a device could not be read (its channels are listed as stale).
+    """
+    _setup_logging("error" if log_level == "info" else log_level)
+    try:
+        config = load_config(config_path)
+    except (ConfigError, OSError) as exc:
+        click.echo(f"tactile-gateway: {exc}", err=True)
+        sys.exit(EXIT_CONFIG)
+    snap = asyncio.run(Poller(config).poll_once())
+    if as_json:
+        click.echo(json.dumps(snapshot_json(snap), indent=2))
+    else:
+        click.echo(snapshot_table(snap))
+    if not all(d.up for d in snap.devices.values()):
+        sys.exit(EXIT_UNREACHABLE)
+
+
+# --------------------------------------------------------------------------- demo
+_SHADES = (236, 238, 240, 94, 130, 166, 202, 208, 214, 220, 226)
+
+
+def render_view(dev: DeviceSnapshot, columns: int, url: str, color: bool = True) -> str:
+    """A plain-text frame: the forces as a grid (N), total force, centre of pressure."""
+    rows = -(-dev.n_channels // columns)
+    fmax = max(1.0, max((float(f) for f in dev.force_n if math.isfinite(f)), default=0.0))
+    out = [f"tactile-gateway demo - metrics on {url} - Ctrl-C to stop", ""]
+    views = dev.channels()
+    for r in range(rows):
+        cells = []
+        for c in range(columns):
+            k = r * columns + c
+            if k >= len(views):
+                break
+            v = views[k]
+            if v.status in (ChannelStatus.OK, ChannelStatus.SATURATED, ChannelStatus.NO_CONTACT):
+                text = f"{(v.force_n or 0.0):6.2f}"
+            else:
+                text = f"{v.status.label[:6]:>6}"
+            if color:
+                shade = _SHADES[min(len(_SHADES) - 1, int((v.force_n or 0.0) / fmax * (len(_SHADES) - 1)))]
+                cells.append(f"\x1b[48;5;{shade}m\x1b[97m {text} \x1b[0m")
+            else:
+                cells.append(f" {text} ")
+        out.append(" ".join(cells))
+    out.append("")
+    cop = dev.center_of_pressure_mm
+    where = "no contact" if cop is None else f"x {cop[0]:5.2f} mm, y {cop[1]:5.2f} mm"
+    out.append(f"total force   {dev.total_force_n:7.3f} N")
+    out.append(f"centre of pr. {where}")
+    out.append(f"in contact    {dev.channels_in_contact} channels, {dev.contact_area_mm2:.2f} mm^2")
+    out.append(f"device        {'up' if dev.up else 'DOWN'}, clock {dev.device_time_s or 0.0:8.2f} s")
+    return "\n".join(out)
+
+
+async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) -> int:
+    """Simulated array + gateway + metrics + live view, until SIGINT/SIGTERM or ``duration_s``."""
+    from sim_device import ArrayConfig, SimArray, serve_tcp
+
+    array_cfg = ArrayConfig(channels=16, columns=4, pitch_mm=2.5, scenario="indentation", speed=1.0)
+    array = SimArray(array_cfg, device_id=1)
+    divider = Divider(array_cfg.supply_v, array_cfg.reference_ohm, array_cfg.adc_bits)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    tty = out.isatty()
+    try:
+        async with serve_tcp([array], host="127.0.0.1", port=0) as sim:
+            device = device_config_for("demo", 1, array.channel_params, 4, 2.5, divider=divider)
+            bus = bus_config_for(
+                "sim", "tcp", [device], host="127.0.0.1", port=sim.port, poll_interval_s=0.05
+            )
+            config = gateway_config_for([bus], host, port)
+            holder = SnapshotHolder()
+            registry = make_registry(holder.get, CollectorRegistry(auto_describe=False))
+            try:
+                server = MetricsServer(registry, host, port).start()
+            except OSError as exc:
+                click.echo(f"tactile-gateway: cannot serve metrics on {host}:{port}: {exc}", err=True)
+                return EXIT_CONFIG
+            try:
+                async with Poller(config, holder):
+                    t_end = None if duration_s is None else time.monotonic() + duration_s
+                    if tty:
+                        out.write("\x1b[?25l\x1b[2J")
+                    while not stop.is_set() and (t_end is None or time.monotonic() < t_end):
+                        snap = holder.get().devices.get("demo")
+                        if snap is not None:
+                            frame = render_view(snap, 4, server.url, color=tty)
+                            out.write(("\x1b[H" + frame + "\x1b[J") if tty else frame + "\n\n")
+                            out.flush()
+                        with contextlib.suppress(TimeoutError):
+                            await asyncio.wait_for(stop.wait(), timeout=0.2)
+            finally:
+                server.stop()
+                if tty:
+                    out.write("\x1b[?25h\n")
+                    out.flush()
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+    return 0
+
+
+@click.command("demo")
+@click.option("--port", default=9830, show_default=True, type=click.IntRange(0, 65535), help="metrics port")
+@click.option("--host", default="127.0.0.1", show_default=True, help="metrics address")
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), help="stop after this many seconds")
+@_log_level
+def demo(port: int, host: str, duration_s: float | None, log_level: str) -> None:
+    """Simulated 4x4 array (scenario "indentation") polled by the gateway, with a live view."""
+    _setup_logging("warning" if log_level == "info" else log_level)
+    sys.exit(asyncio.run(run_demo(port, host, duration_s, sys.stdout)))

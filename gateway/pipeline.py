@@ -1,0 +1,666 @@
+"""Conversion of one poll of a device: registers -> resistance -> drift-corrected force.
+
+Pure (no I/O, no clocks: times are passed in). Per channel:
+
+1. Resistance. ``adc`` devices report divider counts; eq. 18 gives the sensor resistance
+   ``r = R_ref (full_scale / counts - 1)`` (``Divider.resistance``), 0 counts meaning an open
+   sensor and full scale a short. ``float32`` devices report the resistance in ohm directly
+   (+inf open, 0 short). The device's open/short/saturated bitmaps, when configured, take
+   precedence over what the values say.
+2. Force. Channels are grouped by their effect set; each group has one ``SensorModel`` with
+   per-channel parameters. ``SensorModel.track`` inverts the resistance with the creep state
+   relaxed over the time since the channel's last sample (the device clock when the device
+   reports one, else the host's), so a held force reads constant although the resistance
+   keeps falling by creep. ``invert_static`` (no creep state) is kept for diagnostics: its
+   error grows with hold time (about +10 % after 10 min at 2 N for the default sensor).
+   It is evaluated when first asked for (``DeviceSnapshot.force_static_n``, e.g. at a
+   scrape), so the poll path pays for one inversion, not two.
+3. Status per channel: ok, no_contact, saturated, open, short, stale, error.
+4. Array quantities from the channel positions (mm): total force (N), centre of pressure
+   (force-weighted mean position over channels in contact), contact area (channels in
+   contact x pitch^2, mm^2), peak channel.
+
+Everything ends in an immutable ``DeviceSnapshot`` (frozen dataclass, read-only numpy
+arrays). Values that are not valid numbers are NaN inside the snapshot, flagged by the
+status, and ``DeviceSnapshot.channels()`` / the exporter leave them out: no NaN or inf ever
+reaches the metrics.
+"""
+
+from __future__ import annotations
+
+import enum
+import functools
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Literal, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .decode import decode_bitmap, decode_float32, decode_uint16, decode_uint64
+from .errors import DecodeError
+from .model import DividerStatus, ForceStatus, ModelState, SensorModel
+
+if TYPE_CHECKING:
+    from .config import ChannelConfig, DeviceConfig
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+StatusArray = NDArray[np.int8]
+RegisterKind = Literal["input", "holding"]
+
+#: Input registers 2-5 of the register map: the device clock in ms (uint64).
+DEVICE_TIME_ADDRESS = 2
+DEVICE_TIME_REGISTERS = 4
+#: The three status bitmaps (open, short, saturated) are 16 registers apart.
+BITMAP_STRIDE = 16
+
+READ_ERROR_REASONS: tuple[str, ...] = ("timeout", "exception", "connection", "decode")
+
+
+class ChannelStatus(enum.IntEnum):
+    """What one channel's value means in this snapshot."""
+
+    OK = 0  # a force inside the model's range
+    NO_CONTACT = 1  # resistance at or above R(force_min): reads 0 N
+    SATURATED = 2  # at or beyond force_max (model) or ADC at a rail (device bitmap)
+    OPEN = 3  # open circuit (ADC 0 counts, +inf ohm, or the device's open bitmap)
+    SHORT = 4  # short circuit (ADC full scale, 0 ohm, or the device's short bitmap)
+    STALE = 5  # the device did not answer this poll: values are the last ones
+    ERROR = 6  # an invalid value (NaN, negative, out of range): no value
+
+    @property
+    def label(self) -> str:
+        return self.name.lower()
+
+
+STATUS_LABELS: tuple[str, ...] = tuple(s.label for s in ChannelStatus)
+
+
+_G = TypeVar("_G", bound=np.generic)
+
+
+def _read_only(a: NDArray[_G]) -> NDArray[_G]:
+    """Mark a freshly built array (no other reference to it) read-only, without a copy."""
+    a.setflags(write=False)
+    return a
+
+
+# plain ints: numpy compares these without probing an enum member's attributes (hot path)
+_CHANNEL_ERROR = int(ChannelStatus.ERROR)
+_CHANNEL_NO_CONTACT = int(ChannelStatus.NO_CONTACT)
+_CHANNEL_OK = int(ChannelStatus.OK)
+_CHANNEL_OPEN = int(ChannelStatus.OPEN)
+_CHANNEL_SATURATED = int(ChannelStatus.SATURATED)
+_CHANNEL_SHORT = int(ChannelStatus.SHORT)
+_CHANNEL_STALE = int(ChannelStatus.STALE)
+_DIVIDER_INVALID = int(DividerStatus.INVALID)
+_DIVIDER_OPEN = int(DividerStatus.OPEN)
+_DIVIDER_SHORT = int(DividerStatus.SHORT)
+_FORCE_INVALID = int(ForceStatus.INVALID)
+_FORCE_NO_CONTACT = int(ForceStatus.NO_CONTACT)
+_FORCE_OK = int(ForceStatus.OK)
+_FORCE_SATURATED = int(ForceStatus.SATURATED)
+
+
+def _frozen(a: NDArray[_G]) -> NDArray[_G]:
+    out: NDArray[_G] = np.array(a, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+# --------------------------------------------------------------------------- registers
+@dataclass(frozen=True)
+class RegisterBlock:
+    """Registers read by one request: ``values[k]`` is the register at ``address + k``."""
+
+    kind: RegisterKind
+    address: int
+    values: NDArray[np.uint16]
+
+    def covers(self, kind: str, address: int, count: int) -> bool:
+        return (
+            kind == self.kind
+            and self.address <= address
+            and address + count <= self.address + len(self.values)
+        )
+
+
+@dataclass(frozen=True)
+class RegisterImage:
+    """The registers one poll read, as blocks (the coalesced reads of the read plan)."""
+
+    blocks: tuple[RegisterBlock, ...] = ()
+
+    @classmethod
+    def from_reads(
+        cls, reads: Iterable[tuple[RegisterKind, int, Sequence[int] | NDArray[np.uint16]]]
+    ) -> RegisterImage:
+        blocks = []
+        for kind, address, values in reads:
+            arr = np.asarray(values, dtype=np.uint16).copy()
+            arr.setflags(write=False)
+            blocks.append(RegisterBlock(kind, int(address), arr))
+        return cls(tuple(blocks))
+
+    def get(self, kind: RegisterKind, address: int, count: int) -> NDArray[np.uint16] | None:
+        """The registers ``address .. address + count - 1`` or None when not read."""
+        for b in self.blocks:
+            if b.covers(kind, address, count):
+                start = address - b.address
+                return b.values[start : start + count]
+        return None
+
+    def require(self, kind: RegisterKind, address: int, count: int, what: str) -> NDArray[np.uint16]:
+        regs = self.get(kind, address, count)
+        if regs is None:
+            raise DecodeError(f"{what}: {kind} registers {address}..{address + count - 1} were not read")
+        return regs
+
+
+@dataclass(frozen=True)
+class RawSample:
+    """One poll's measurements of all N device channels, decoded but not yet converted."""
+
+    counts: IntArray | None = None  # ADC counts (encoding "adc")
+    resistance_ohm: FloatArray | None = None  # ohm (encoding "float32")
+    open_bits: BoolArray | None = None
+    short_bits: BoolArray | None = None
+    saturated_bits: BoolArray | None = None
+    temperature_c: FloatArray | None = None
+    reference_force_n: FloatArray | None = None
+    device_time_s: float | None = None
+
+
+def decode_sample(device: DeviceConfig, image: RegisterImage) -> RawSample:
+    """Decode the registers of one poll of ``device`` (``DecodeError`` if any are missing)."""
+    regs = device.registers
+    n = device.n_channels
+    wo, bo = regs.word_order, regs.byte_order
+    counts = resistance = None
+    if device.encoding == "adc":
+        counts = decode_uint16(image.require("input", regs.adc_address, n, "ADC counts"), bo)
+    elif device.encoding == "float32":
+        raw = image.require("input", regs.float_address, 2 * n, "float32 resistances")
+        resistance = decode_float32(raw, wo, bo)
+    else:
+        raise DecodeError(f"unknown encoding {device.encoding!r}")
+    bitmaps: list[BoolArray | None] = [None, None, None]
+    if regs.status_address is not None:
+        n_regs = -(-n // 16)
+        for k in range(3):
+            words = image.get("input", regs.status_address + k * BITMAP_STRIDE, n_regs)
+            if words is not None:
+                bitmaps[k] = decode_bitmap(words, n, bo)
+    temperature = reference = None
+    if regs.temperature_address is not None:
+        words = image.get("input", regs.temperature_address, 2 * n)
+        if words is not None:
+            temperature = decode_float32(words, wo, bo)
+    if regs.force_reference_address is not None:
+        words = image.get("input", regs.force_reference_address, 2 * n)
+        if words is not None:
+            reference = decode_float32(words, wo, bo)
+    device_time = None
+    words = image.get("input", DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS)
+    if words is not None:
+        device_time = float(decode_uint64(words, wo, bo)[0]) / 1000.0
+    return RawSample(
+        counts, resistance, bitmaps[0], bitmaps[1], bitmaps[2], temperature, reference, device_time
+    )
+
+
+# --------------------------------------------------------------------------- snapshots
+@dataclass(frozen=True)
+class ChannelView:
+    """One channel of a snapshot, with absent values as None (never NaN or inf)."""
+
+    index: int
+    name: str
+    x_mm: float
+    y_mm: float
+    status: ChannelStatus
+    resistance_ohm: float | None
+    force_n: float | None
+    force_static_n: float | None
+    reference_force_n: float | None
+
+
+def _opt(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+@dataclass(frozen=True, eq=False)
+class StaticEstimate:
+    """The inputs of a snapshot's static inversion (``SensorModel.invert_static``)."""
+
+    groups: tuple[tuple[NDArray[np.intp], SensorModel], ...]
+    resistance_ohm: FloatArray  # as given to the model: NaN where the channel had no value
+    temperature_c: FloatArray | None  # per snapshot channel, or None
+    valued: BoolArray  # channels whose status carries a force
+
+    def evaluate(self) -> FloatArray:
+        out = np.full(len(self.resistance_ohm), np.nan)
+        for idx, model in self.groups:
+            temp = None
+            if self.temperature_c is not None and model.has("temperature"):
+                temp = self.temperature_c[idx]
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                out[idx] = model.invert_static(self.resistance_ohm[idx], temp).force_n
+        return _read_only(np.where(self.valued & np.isfinite(out), out, np.nan))
+
+
+@dataclass(frozen=True, eq=False)
+class DeviceSnapshot:
+    """The converted result of the last poll of one device (immutable).
+
+    Arrays have one entry per enabled channel (``channel_index`` holds the device index);
+    NaN marks an absent value (see ``status``). Forces in N, resistances in ohm, positions
+    and centre of pressure in mm, contact area in mm^2, times in s.
+    """
+
+    device: str
+    bus: str
+    channel_index: IntArray
+    channel_names: tuple[str, ...]
+    x_mm: FloatArray
+    y_mm: FloatArray
+    resistance_ohm: FloatArray
+    force_n: FloatArray
+    static_estimate: StaticEstimate | None  # see ``force_static_n``
+    reference_force_n: FloatArray
+    status: StatusArray
+    up: bool
+    timestamp_s: float  # wall clock of this poll (Unix time)
+    last_success_timestamp_s: float | None  # wall clock of the last good poll
+    device_time_s: float | None  # device clock at the last good poll
+    poll_interval_s: float
+    total_force_n: float = 0.0
+    center_of_pressure_mm: tuple[float, float] | None = None
+    channels_in_contact: int = 0
+    contact_area_mm2: float = 0.0
+    peak_channel: str | None = None
+    peak_force_n: float | None = None
+    error: str | None = None  # why the last poll failed
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.channel_names)
+
+    @functools.cached_property
+    def force_static_n(self) -> FloatArray:
+        """Force by static inversion (no creep state), N; NaN where absent. A diagnostic,
+        so it is computed on first use (e.g. a scrape), not at every poll."""
+        if self.static_estimate is None:
+            return _read_only(np.full(self.n_channels, np.nan))
+        return self.static_estimate.evaluate()
+
+    def channels(self) -> list[ChannelView]:
+        return [
+            ChannelView(
+                index=int(self.channel_index[k]),
+                name=self.channel_names[k],
+                x_mm=float(self.x_mm[k]),
+                y_mm=float(self.y_mm[k]),
+                status=ChannelStatus(int(self.status[k])),
+                resistance_ohm=_opt(float(self.resistance_ohm[k])),
+                force_n=_opt(float(self.force_n[k])),
+                force_static_n=_opt(float(self.force_static_n[k])),
+                reference_force_n=_opt(float(self.reference_force_n[k])),
+            )
+            for k in range(self.n_channels)
+        ]
+
+    def status_counts(self) -> dict[str, int]:
+        counts = np.bincount(self.status.astype(np.int64), minlength=len(ChannelStatus))
+        return {s.label: int(counts[s]) for s in ChannelStatus}
+
+
+@dataclass(frozen=True)
+class ArrayQuantities:
+    """Whole-array quantities over the channels in contact (status ok or saturated, F > 0)."""
+
+    total_force_n: float
+    center_of_pressure_mm: tuple[float, float] | None
+    channels_in_contact: int
+    contact_area_mm2: float
+    peak_index: int | None  # position in the snapshot arrays
+    peak_force_n: float | None
+
+
+def array_quantities(
+    force_n: FloatArray, status: StatusArray, x_mm: FloatArray, y_mm: FloatArray, pitch_mm: float
+) -> ArrayQuantities:
+    """Total force (N), centre of pressure (mm), contact area (mm^2) and peak channel.
+
+    The centre of pressure is sum(F_i x_i) / sum(F_i) over channels in contact; it is None
+    (not NaN) when nothing is in contact. Contact area = channels in contact x pitch^2.
+    """
+    f = np.asarray(force_n, dtype=np.float64)
+    st = np.asarray(status)
+    with np.errstate(invalid="ignore"):
+        contact = ((st == _CHANNEL_OK) | (st == _CHANNEL_SATURATED)) & np.isfinite(f) & (f > 0.0)
+    n = int(np.count_nonzero(contact))
+    if n == 0:
+        return ArrayQuantities(0.0, None, 0, 0.0, None, None)
+    fc = np.where(contact, f, 0.0)
+    total = float(fc.sum())
+    cop = (float((fc * x_mm).sum() / total), float((fc * y_mm).sum() / total))
+    peak = int(np.argmax(np.where(contact, f, -np.inf)))
+    return ArrayQuantities(total, cop, n, float(n * pitch_mm * pitch_mm), peak, float(f[peak]))
+
+
+# --------------------------------------------------------------------------- counters
+DEFAULT_DURATION_BUCKETS_S: tuple[float, ...] = (
+    0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class HistogramData:
+    """A cumulative histogram (Prometheus semantics): ``bucket_counts[k]`` counts values
+    <= ``bounds[k]``; the last entry (bound +inf) equals ``count``."""
+
+    bounds: tuple[float, ...] = DEFAULT_DURATION_BUCKETS_S
+    bucket_counts: tuple[int, ...] = (0,) * (len(DEFAULT_DURATION_BUCKETS_S) + 1)
+    sum: float = 0.0
+    count: int = 0
+
+    def observe(self, value: float) -> HistogramData:
+        if not math.isfinite(value):
+            return self
+        counts = tuple(
+            c + (1 if value <= b else 0)
+            for c, b in zip(self.bucket_counts, (*self.bounds, math.inf), strict=True)
+        )
+        return HistogramData(self.bounds, counts, self.sum + value, self.count + 1)
+
+
+@dataclass(frozen=True)
+class DeviceCounters:
+    """Cumulative counters of one device since the gateway started."""
+
+    reads_total: int = 0
+    read_errors_total: Mapping[str, int] = field(
+        default_factory=lambda: MappingProxyType(dict.fromkeys(READ_ERROR_REASONS, 0))
+    )
+    polls_total: int = 0
+    poll_duration: HistogramData = field(default_factory=HistogramData)
+
+    def with_reads(self, n: int = 1) -> DeviceCounters:
+        return replace(self, reads_total=self.reads_total + n)
+
+    def with_error(self, reason: str) -> DeviceCounters:
+        if reason not in READ_ERROR_REASONS:
+            raise ValueError(f"unknown read error reason {reason!r}")
+        errors = dict(self.read_errors_total)
+        errors[reason] += 1
+        return replace(self, read_errors_total=MappingProxyType(errors))
+
+    def with_poll(self, duration_s: float) -> DeviceCounters:
+        return replace(
+            self, polls_total=self.polls_total + 1, poll_duration=self.poll_duration.observe(duration_s)
+        )
+
+
+@dataclass(frozen=True)
+class GatewaySnapshot:
+    """Everything the exporter shows: the last snapshot and counters of every device."""
+
+    devices: Mapping[str, DeviceSnapshot] = field(default_factory=lambda: MappingProxyType({}))
+    counters: Mapping[str, DeviceCounters] = field(default_factory=lambda: MappingProxyType({}))
+    sequence: int = 0
+
+    @classmethod
+    def build(
+        cls, devices: Mapping[str, DeviceSnapshot], counters: Mapping[str, DeviceCounters], sequence: int
+    ) -> GatewaySnapshot:
+        return cls(MappingProxyType(dict(devices)), MappingProxyType(dict(counters)), sequence)
+
+
+# --------------------------------------------------------------------------- processing
+@dataclass(frozen=True)
+class DeviceState:
+    """What a device's conversion carries from one poll to the next (immutable)."""
+
+    model_state: ModelState  # one entry per enabled channel
+    last_time_s: float | None = None  # device clock (or host monotonic clock) of the last sample
+    last_host_time_s: float | None = None
+    time_from_device: bool = False
+    last: DeviceSnapshot | None = None
+
+
+def state_arrays(state: ModelState) -> list[FloatArray]:
+    """Copies of every per-channel array of a ``ModelState``, in field order."""
+    return [np.array(getattr(state, f.name), dtype=np.float64, copy=True) for f in fields(ModelState)]
+
+
+def state_from_arrays(arrays: Sequence[FloatArray]) -> ModelState:
+    return ModelState(**{f.name: a for f, a in zip(fields(ModelState), arrays, strict=True)})
+
+
+def channel_key(device: DeviceConfig, channel: ChannelConfig) -> tuple[object, ...]:
+    """Identity of a channel's physics: its creep state may only be reused when all match."""
+    return (device.name, device.encoding, channel.index, tuple(channel.effects), channel.params)
+
+
+class DeviceProcessor:
+    """Converts polls of one device. Holds only immutable configuration-derived objects."""
+
+    def __init__(self, device: DeviceConfig, bus: str, poll_interval_s: float) -> None:
+        self.device = device
+        self.bus = bus
+        self.poll_interval_s = float(poll_interval_s)
+        chans = [c for c in device.channels if c.enabled]
+        self.channels: tuple[ChannelConfig, ...] = tuple(chans)
+        self.index = np.array([c.index for c in chans], dtype=np.int64)
+        self.names = tuple(c.name for c in chans)
+        self.x_mm = np.array([c.x_mm for c in chans], dtype=np.float64)
+        self.y_mm = np.array([c.y_mm for c in chans], dtype=np.float64)
+        for a in (self.index, self.x_mm, self.y_mm):
+            a.setflags(write=False)
+        by_effects: dict[tuple[str, ...], list[int]] = {}
+        for k, c in enumerate(chans):
+            by_effects.setdefault(tuple(c.effects), []).append(k)
+        self.groups: tuple[tuple[NDArray[np.intp], SensorModel], ...] = tuple(
+            (np.array(ks, dtype=np.intp), SensorModel(effects, [chans[k].params for k in ks]))
+            for effects, ks in by_effects.items()
+        )
+        self.keys = tuple(channel_key(device, c) for c in chans)
+        self._single_group = len(self.groups) == 1 and bool(
+            np.array_equal(self.groups[0][0], np.arange(len(chans)))
+        )
+
+    @property
+    def name(self) -> str:
+        return self.device.name
+
+    def initial_state(self) -> DeviceState:
+        return DeviceState(ModelState.zeros(len(self.channels)))
+
+    def carry_state(self, old: DeviceProcessor, state: DeviceState) -> DeviceState:
+        """State for this (new) configuration from an old one: channels whose device,
+        index, effects and parameters are unchanged keep their creep state; others start
+        relaxed. The clock and the last snapshot carry over when the device is the same."""
+        fresh = self.initial_state().model_state
+        arrays = state_arrays(fresh)
+        old_pos = {k: i for i, k in enumerate(old.keys)}
+        kept = 0
+        for i, key in enumerate(self.keys):
+            j = old_pos.get(key)
+            if j is None:
+                continue
+            kept += 1
+            src = state.model_state
+            for dst, s in zip(arrays, state_arrays(src), strict=True):
+                dst[i] = s[j]
+        model_state = state_from_arrays(arrays)
+        if kept == 0:
+            return DeviceState(model_state)
+        last = state.last if state.last is not None and state.last.channel_names == self.names else None
+        return DeviceState(
+            model_state, state.last_time_s, state.last_host_time_s, state.time_from_device, last
+        )
+
+    def kept_channels(self, old: DeviceProcessor) -> int:
+        return len(set(self.keys) & set(old.keys))
+
+    # ------------------------------------------------------------------ one poll
+    def _resistance(self, raw: RawSample) -> tuple[FloatArray, FloatArray, StatusArray]:
+        """Resistance (ohm; NaN invalid, +inf open), the resistance given to the model, and the
+        base status (OK / OPEN / SHORT / ERROR).
+
+        The rails mean open (0 counts, +inf ohm) and short (full scale, 0 ohm) only when the
+        device reports no fault bitmaps. With bitmaps the device says which channels are
+        faulty, and a rail is a reading: no current at rest (a sensor whose contact is open
+        reads no contact, 0 N) or less resistance than the converter resolves (saturated).
+        """
+        idx = self.index
+        status = np.full(len(idx), _CHANNEL_OK, dtype=np.int8)
+        if raw.counts is not None:
+            r, dstat = self.device.divider.resistance(raw.counts[idx])
+            rail_open = dstat == _DIVIDER_OPEN
+            rail_short = dstat == _DIVIDER_SHORT
+            status[dstat == _DIVIDER_INVALID] = _CHANNEL_ERROR
+        elif raw.resistance_ohm is not None:
+            r = np.asarray(raw.resistance_ohm[idx], dtype=np.float64)
+            with np.errstate(invalid="ignore"):
+                rail_open = np.isposinf(r)
+                rail_short = r == 0.0
+                status[np.isnan(r) | np.isneginf(r) | (r < 0.0)] = _CHANNEL_ERROR
+        else:
+            raise DecodeError("a sample needs ADC counts or resistances")
+        r = np.asarray(r, dtype=np.float64)
+        if raw.open_bits is None and raw.short_bits is None:
+            status[rail_open] = _CHANNEL_OPEN
+            status[rail_short] = _CHANNEL_SHORT
+            return r, r, status
+        big, tiny = np.finfo(np.float64).max, np.finfo(np.float64).tiny
+        r_model = np.where(rail_open, big, np.where(rail_short, tiny, r))
+        if raw.open_bits is not None:
+            status[raw.open_bits[idx]] = _CHANNEL_OPEN
+        if raw.short_bits is not None:
+            status[raw.short_bits[idx] & (status != _CHANNEL_OPEN)] = _CHANNEL_SHORT
+        return r, r_model, status
+
+    def _dt(self, state: DeviceState, raw: RawSample, host_time_s: float) -> tuple[float, float, bool]:
+        """Seconds since the previous sample: device clock if it has one, else host clock."""
+        use_device = raw.device_time_s is not None
+        now = raw.device_time_s if raw.device_time_s is not None else host_time_s
+        if state.last_time_s is None:
+            return 0.0, now, use_device
+        if use_device == state.time_from_device and now >= state.last_time_s:
+            return now - state.last_time_s, now, use_device
+        # clock source changed or the device clock went back (restart): use the host clock
+        host_dt = host_time_s - state.last_host_time_s if state.last_host_time_s is not None else 0.0
+        return max(0.0, host_dt), now, use_device
+
+    def process(
+        self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
+    ) -> tuple[DeviceSnapshot, DeviceState]:
+        """Convert one good poll. ``host_time_s`` is a monotonic clock, ``wall_time_s`` Unix time."""
+        n = len(self.channels)
+        resistance, r_model, status = self._resistance(raw)
+        dt, now, use_device = self._dt(state, raw, host_time_s)
+        usable = status == _CHANNEL_OK
+        r_model = np.where(usable, r_model, np.nan)
+        ms = state.model_state
+        temperature = None if raw.temperature_c is None else raw.temperature_c[self.index]
+        if self._single_group:
+            model = self.groups[0][1]
+            temp = temperature if model.has("temperature") else None
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                inv, new_state_model = model.track(r_model, ms, dt, temp)
+            force, model_status = inv.force_n, inv.status
+        else:
+            force = np.full(n, np.nan)
+            model_status = np.full(n, _FORCE_INVALID, dtype=np.int8)
+            new = state_arrays(ms)
+            for idx, model in self.groups:
+                temp = temperature[idx] if temperature is not None and model.has("temperature") else None
+                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                    inv, gstate = model.track(r_model[idx], ms.select(idx), dt, temp)
+                force[idx] = inv.force_n
+                model_status[idx] = inv.status
+                for dst, src in zip(new, state_arrays(gstate), strict=True):
+                    dst[idx] = src
+            new_state_model = state_from_arrays(new)
+        status = np.where(usable & (model_status == _FORCE_NO_CONTACT), _CHANNEL_NO_CONTACT, status)
+        status = np.where(usable & (model_status == _FORCE_SATURATED), _CHANNEL_SATURATED, status)
+        status = np.where(usable & (model_status == _FORCE_INVALID), _CHANNEL_ERROR, status)
+        if raw.saturated_bits is not None:
+            # the device flags ADC readings at either rail; only at the top one is the force
+            # beyond the range (at the bottom the model already reads no contact)
+            device_sat = raw.saturated_bits[self.index] & usable & (model_status == _FORCE_OK)
+            status = np.where(device_sat, _CHANNEL_SATURATED, status)
+        status = status.astype(np.int8)
+        valued = (status == _CHANNEL_OK) | (status == _CHANNEL_NO_CONTACT) | (status == _CHANNEL_SATURATED)
+        force = np.where(valued & np.isfinite(force), force, np.nan)
+        with np.errstate(invalid="ignore"):
+            r_out = np.where(np.isfinite(resistance) & (resistance >= 0.0), resistance, np.nan)
+        reference = np.full(n, np.nan)
+        if raw.reference_force_n is not None:
+            reference = np.asarray(raw.reference_force_n[self.index], dtype=np.float64)
+        q = array_quantities(force, status, self.x_mm, self.y_mm, float(self.device.pitch_mm))
+        snap = DeviceSnapshot(
+            device=self.device.name,
+            bus=self.bus,
+            channel_index=self.index,
+            channel_names=self.names,
+            x_mm=self.x_mm,
+            y_mm=self.y_mm,
+            resistance_ohm=_read_only(r_out),
+            force_n=_read_only(force),
+            static_estimate=StaticEstimate(self.groups, _read_only(r_model), temperature, _read_only(valued)),
+            reference_force_n=_read_only(reference),
+            status=_read_only(status),
+            up=True,
+            timestamp_s=wall_time_s,
+            last_success_timestamp_s=wall_time_s,
+            device_time_s=raw.device_time_s,
+            poll_interval_s=self.poll_interval_s,
+            total_force_n=q.total_force_n,
+            center_of_pressure_mm=q.center_of_pressure_mm,
+            channels_in_contact=q.channels_in_contact,
+            contact_area_mm2=q.contact_area_mm2,
+            peak_channel=None if q.peak_index is None else self.names[q.peak_index],
+            peak_force_n=q.peak_force_n,
+        )
+        new_state = DeviceState(new_state_model, now, host_time_s, use_device, snap)
+        return snap, new_state
+
+    def stale(self, state: DeviceState, wall_time_s: float, error: str) -> tuple[DeviceSnapshot, DeviceState]:
+        """The device did not answer: keep the last values, mark every channel stale.
+
+        The creep state is not advanced; the next good sample relaxes it over the whole gap.
+        """
+        n = len(self.channels)
+        stale_status = _frozen(np.full(n, _CHANNEL_STALE, dtype=np.int8))
+        last = state.last
+        if last is None:
+            nan = _frozen(np.full(n, np.nan))
+            snap = DeviceSnapshot(
+                device=self.device.name,
+                bus=self.bus,
+                channel_index=_frozen(self.index),
+                channel_names=self.names,
+                x_mm=_frozen(self.x_mm),
+                y_mm=_frozen(self.y_mm),
+                resistance_ohm=nan,
+                force_n=nan,
+                static_estimate=None,
+                reference_force_n=nan,
+                status=stale_status,
+                up=False,
+                timestamp_s=wall_time_s,
+                last_success_timestamp_s=None,
+                device_time_s=None,
+                poll_interval_s=self.poll_interval_s,
+                error=error,
+            )
+        else:
+            snap = replace(last, status=stale_status, up=False, timestamp_s=wall_time_s, error=error)
+        return snap, state

@@ -1,0 +1,677 @@
+"""The poll loop: one asyncio task per bus, publishing immutable snapshots.
+
+Each bus task connects its ``ModbusTransport``, then every ``poll_interval_s`` polls each
+of its devices: the coalesced reads of ``read_plan``, one request at a time, each retried
+up to ``retries`` times on a timeout or a garbled answer. The registers go through the
+pure ``pipeline`` and a new ``GatewaySnapshot`` is published after every device poll.
+
+Failure handling:
+
+* a device that does not answer is marked stale (last values kept) and is tried again
+  after a jittered back-off that grows per failure, so a dead device costs its bus little;
+* a lost or refused connection closes the transport and reconnects after
+  ``uniform(0, b)`` seconds ("full jitter"), b doubling from ``backoff_initial_s`` to
+  ``backoff_max_s``: no busy loop and no synchronized reconnect storm;
+* buses are independent tasks, so nothing on one bus can stall another;
+* nothing a device sends can end a bus task: every unexpected error is logged, counted
+  as a decode error and the loop goes on.
+
+``reload`` swaps in a new configuration; channels whose device, index, effects and
+parameters are unchanged keep their creep state (``DeviceProcessor.carry_state``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import bisect
+import concurrent.futures
+import contextlib
+import functools
+import itertools
+import logging
+import math
+import random
+import threading
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+from .config import BusConfig, DeviceConfig, GatewayConfig, ReadRequest, read_plan
+from .errors import (
+    DecodeError,
+    DeviceConnectionError,
+    DeviceError,
+    DeviceExceptionResponse,
+    DeviceTimeoutError,
+)
+from .pipeline import (
+    DEVICE_TIME_ADDRESS,
+    DEVICE_TIME_REGISTERS,
+    DeviceCounters,
+    DeviceProcessor,
+    DeviceSnapshot,
+    DeviceState,
+    GatewaySnapshot,
+    HistogramData,
+    RegisterImage,
+    RegisterKind,
+    decode_sample,
+)
+from .transport import ModbusTransport
+
+log = logging.getLogger(__name__)
+
+#: Reads merge across gaps of at most this many registers. The three status bitmaps are 16
+#: registers apart and every register between them exists (docs/register-map.md), so the
+#: bitmaps of any channel count come in one request. Registers in a wider gap may not exist
+#: (a device answers exception 2), so nothing wider is merged; a device that refuses a
+#: merged read anyway falls back to unmerged reads.
+MERGE_GAP = 15
+
+#: Modbus exception 6 (server device busy) is worth a retry; other exceptions are not.
+RETRYABLE_EXCEPTION_CODES = frozenset({6})
+
+
+def plan_with_device_time(plan: tuple[ReadRequest, ...], max_read_registers: int) -> tuple[ReadRequest, ...]:
+    """Add the device clock (input registers 2-5, uint64 ms) to a read plan.
+
+    The clock makes the creep time steps right whatever the poll timing (and with a
+    simulator running faster than real time). It joins an input read that touches it,
+    else it is one more request (registers 7-15 do not exist, so it cannot ride on the
+    status read). A device without the clock answers exception 2 and the poller falls
+    back to the plan without it (host clock).
+    """
+    lo, hi = DEVICE_TIME_ADDRESS, DEVICE_TIME_ADDRESS + DEVICE_TIME_REGISTERS - 1
+    inputs = [r for r in plan if r.kind == "input"]
+    if any(r.address <= lo and r.end >= hi for r in inputs):
+        return plan
+    for r in inputs:
+        start, end = min(r.address, lo), max(r.end, hi)
+        if r.address <= hi + 1 and r.end >= lo - 1 and end - start + 1 <= max_read_registers:
+            merged = ReadRequest("input", start, end - start + 1, ("device_time", *r.purpose))
+            return tuple(merged if q is r else q for q in plan)
+    return (ReadRequest("input", lo, DEVICE_TIME_REGISTERS, ("device_time",)), *plan)
+
+
+def device_plan(
+    device: DeviceConfig, max_read_registers: int, merge_gap: int, clock: bool
+) -> tuple[ReadRequest, ...]:
+    """The reads of one poll: the configuration's ``read_plan`` (coalesced across gaps of
+    ``merge_gap`` registers) plus the device clock when ``clock``."""
+    plan = tuple(read_plan(device, max_read_registers, max_gap=merge_gap))
+    return plan_with_device_time(plan, max_read_registers) if clock else plan
+
+
+def error_reason(exc: BaseException) -> str:
+    """The ``reason`` label of a read error."""
+    if isinstance(exc, DeviceConnectionError):
+        return "connection"
+    if isinstance(exc, DeviceTimeoutError):
+        return "timeout"
+    if isinstance(exc, DeviceExceptionResponse):
+        return "exception"
+    return "decode"
+
+
+_Converted = tuple[DeviceSnapshot, DeviceState, float]
+
+
+def _convert(
+    processor: DeviceProcessor,
+    state: DeviceState,
+    reads: list[tuple[RegisterKind, int, list[int]]],
+    wall_time_s: float,
+    host_time_s: float,
+    t0: float,
+) -> _Converted:
+    """Decode and convert one poll (runs in the converter thread; pure apart from the clock).
+
+    Returns the snapshot, the new state and the poll duration (reads + conversion, s).
+    """
+    raw = decode_sample(processor.device, RegisterImage.from_reads(reads))
+    snap, new_state = processor.process(state, raw, wall_time_s, host_time_s)
+    return snap, new_state, time.monotonic() - t0
+
+
+class SnapshotHolder:
+    """Holds the latest ``GatewaySnapshot``; safe to read from any thread (the exporter's).
+
+    ``subscribe`` registers a callback run (in the poller's thread) after each publish.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._snapshot = GatewaySnapshot()
+        self._callbacks: list[Callable[[GatewaySnapshot], None]] = []
+
+    def get(self) -> GatewaySnapshot:
+        with self._lock:
+            return self._snapshot
+
+    def publish(self, snapshot: GatewaySnapshot) -> None:
+        with self._lock:
+            self._snapshot = snapshot
+            callbacks = list(self._callbacks)
+        for cb in callbacks:
+            try:
+                cb(snapshot)
+            except Exception:
+                log.exception("snapshot subscriber failed")
+
+    def subscribe(self, callback: Callable[[GatewaySnapshot], None]) -> None:
+        with self._lock:
+            self._callbacks.append(callback)
+
+
+class Tally:
+    """Mutable counters of one device inside its bus task; ``freeze()`` gives the immutable
+    ``DeviceCounters`` that snapshots carry (cached until the next change)."""
+
+    def __init__(self, base: DeviceCounters | None = None) -> None:
+        base = base or DeviceCounters()
+        self.reads_total = base.reads_total
+        self.errors = dict(base.read_errors_total)
+        self.polls_total = base.polls_total
+        h = base.poll_duration
+        self.bounds = h.bounds
+        # per-bucket (not cumulative) counts, the last one for +Inf
+        self.buckets = [c - p for c, p in zip(h.bucket_counts, (0, *h.bucket_counts[:-1]), strict=True)]
+        self.duration_sum = h.sum
+        self._frozen: DeviceCounters | None = base
+
+    def read(self) -> None:
+        self.reads_total += 1
+        self._frozen = None
+
+    def error(self, reason: str) -> None:
+        if reason not in self.errors:
+            raise ValueError(f"unknown read error reason {reason!r}")
+        self.errors[reason] += 1
+        self._frozen = None
+
+    def poll(self, duration_s: float) -> None:
+        self.polls_total += 1
+        if math.isfinite(duration_s):
+            self.buckets[bisect.bisect_left(self.bounds, duration_s)] += 1
+            self.duration_sum += duration_s
+        self._frozen = None
+
+    def freeze(self) -> DeviceCounters:
+        if self._frozen is None:
+            cumulative = tuple(itertools.accumulate(self.buckets))
+            self._frozen = DeviceCounters(
+                reads_total=self.reads_total,
+                read_errors_total=MappingProxyType(dict(self.errors)),
+                polls_total=self.polls_total,
+                poll_duration=HistogramData(self.bounds, cumulative, self.duration_sum, cumulative[-1]),
+            )
+        return self._frozen
+
+
+@dataclass
+class DeviceRunner:
+    """Mutable bookkeeping of one device inside its bus task (never shared across threads)."""
+
+    config: DeviceConfig
+    processor: DeviceProcessor
+    plan: tuple[ReadRequest, ...]  # what one poll reads (see ``device_plan``)
+    state: DeviceState
+    max_read_registers: int = 125
+    merge_gap: int = MERGE_GAP  # 0 once the device refused a merged read
+    clock: bool = True  # False once the device refused the clock registers
+    tally: Tally = field(default_factory=Tally)
+    failures: int = 0
+    next_attempt: float = 0.0
+    last_error: str | None = None
+    pending: asyncio.Future[_Converted] | None = None  # conversion in flight
+
+    @property
+    def counters(self) -> DeviceCounters:
+        return self.tally.freeze()
+
+
+@dataclass(frozen=True)
+class ReloadReport:
+    """What a reload changed."""
+
+    devices_added: tuple[str, ...]
+    devices_removed: tuple[str, ...]
+    channels_kept: int
+    channels_reset: int
+
+
+class BusWorker:
+    """The poll loop of one bus."""
+
+    def __init__(
+        self,
+        bus: BusConfig,
+        runners: list[DeviceRunner],
+        publish: Callable[[DeviceRunner, DeviceSnapshot], None],
+        *,
+        transport_factory: Callable[[BusConfig], ModbusTransport] = ModbusTransport,
+        rng: random.Random | None = None,
+        wall_clock: Callable[[], float] = time.time,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.bus = bus
+        self.runners = runners
+        self._publish = publish
+        self.transport = transport_factory(bus)
+        self._rng = rng or random.Random()
+        self._wall = wall_clock
+        self._mono = monotonic
+        self.task: asyncio.Task[None] | None = None
+        self._executor: concurrent.futures.ThreadPoolExecutor | None = None
+        self._stopping = False
+        self.connect_failures = 0
+
+    @property
+    def name(self) -> str:
+        return self.bus.name
+
+    # ------------------------------------------------------------------ backoff
+    def _jitter(self, failures: int) -> float:
+        """Full-jitter back-off: uniform(0, min(max, initial * 2^(failures-1))), with a
+        floor of a tenth of ``backoff_initial_s`` so it can never spin."""
+        initial = float(self.bus.backoff_initial_s)
+        cap = min(float(self.bus.backoff_max_s), initial * 2.0 ** min(max(failures - 1, 0), 30))
+        return max(0.1 * initial, self._rng.uniform(0.0, cap))
+
+    # ------------------------------------------------------------------ requests
+    async def _read(self, runner: DeviceRunner, req: ReadRequest) -> list[int]:
+        """One request of the read plan with bounded retries (timeouts, garbled answers,
+        busy exceptions). Counts every attempt and every failure."""
+        attempts = 1 + max(0, int(self.bus.retries))
+        dev = runner.config
+        last: DeviceError | None = None
+        for attempt in range(attempts):
+            runner.tally.read()
+            try:
+                if req.kind == "input":
+                    return await self.transport.read_input_registers(dev.device_id, req.address, req.count)
+                return await self.transport.read_holding_registers(dev.device_id, req.address, req.count)
+            except DeviceError as exc:
+                runner.tally.error(error_reason(exc))
+                last = exc
+                if isinstance(exc, DeviceConnectionError):
+                    raise
+                if (
+                    isinstance(exc, DeviceExceptionResponse)
+                    and exc.exception_code not in RETRYABLE_EXCEPTION_CODES
+                ):
+                    raise
+                if attempt + 1 < attempts and self.transport.is_serial_framing:
+                    # let a late answer to this request arrive and be discarded, so that
+                    # it cannot be taken for the answer to the retry (RTU has no ids)
+                    await asyncio.sleep(min(0.5 * float(self.bus.timeout_s), 0.2))
+        assert last is not None
+        raise last
+
+    async def poll_device(self, runner: DeviceRunner) -> bool:
+        """Read one device once and hand the registers to its conversion; True if the reads
+        succeeded.
+
+        The conversion (decode + model) runs in this bus's converter thread and its result
+        is published as soon as it is done, while the task goes on with the next reads: CPU
+        work overlaps the waits for the device, and the event loop (other buses) never waits
+        for the model. Conversions of one device are applied in poll order.
+
+        Raises ``DeviceConnectionError`` (after publishing a stale snapshot) when the bus
+        connection is gone, so that the caller reconnects.
+        """
+        t0 = time.monotonic()  # for the duration only (scheduling uses self._mono)
+        try:
+            reads: list[tuple[RegisterKind, int, list[int]]] = []
+            for req in runner.plan:
+                kind: RegisterKind = "input" if req.kind == "input" else "holding"
+                try:
+                    regs = await self._read(runner, req)
+                except DeviceExceptionResponse as exc:
+                    if exc.exception_code != 2 or not self._fall_back(runner, req):
+                        raise
+                    return await self.poll_device(runner)
+                reads.append((kind, req.address, regs))
+        except DeviceError as exc:  # already counted per request
+            await self.settle(runner)
+            self._fail(runner, exc)
+            if isinstance(exc, DeviceConnectionError):
+                raise
+            return False
+        await self.settle(runner)
+        loop = asyncio.get_running_loop()
+        job = functools.partial(
+            _convert, runner.processor, runner.state, reads, self._wall(), self._mono(), t0
+        )
+        future = loop.run_in_executor(self._converter(), job)
+        runner.pending = future
+        future.add_done_callback(functools.partial(self._converted, runner))
+        return True
+
+    def _converter(self) -> concurrent.futures.ThreadPoolExecutor:
+        if self._executor is None:
+            self._executor = concurrent.futures.ThreadPoolExecutor(
+                max_workers=1, thread_name_prefix=f"tactile-convert-{self.name}"
+            )
+        return self._executor
+
+    def _converted(self, runner: DeviceRunner, future: asyncio.Future[_Converted]) -> None:
+        """Apply a finished conversion (in the loop thread; once, in poll order)."""
+        if runner.pending is not future:
+            return
+        runner.pending = None
+        if future.cancelled():
+            return
+        exc = future.exception()
+        if exc is not None:  # bad data must never end the loop
+            if not isinstance(exc, DeviceError):
+                log.error("device %s: conversion failed", runner.config.name, exc_info=exc)
+                exc = DecodeError(f"conversion failed: {exc}")
+            runner.tally.error("decode")
+            self._fail(runner, exc)
+            return
+        snap, state, duration_s = future.result()
+        runner.state = state
+        runner.failures = 0
+        runner.next_attempt = 0.0
+        runner.last_error = None
+        runner.tally.poll(duration_s)
+        self._publish(runner, snap)
+
+    async def settle(self, runner: DeviceRunner) -> None:
+        """Wait until the device's conversion in flight (if any) is applied."""
+        future = runner.pending
+        if future is not None:
+            await asyncio.wait({future})
+            self._converted(runner, future)
+
+    def _fall_back(self, runner: DeviceRunner, req: ReadRequest) -> bool:
+        """After exception 2 (illegal address): drop the clock, then the merging. True if
+        the plan changed (and the poll is worth repeating)."""
+        name = runner.config.name
+        if runner.clock and "device_time" in req.purpose:
+            log.info("device %s has no clock registers (2-5); using the host clock", name)
+            runner.clock = False
+        elif runner.merge_gap > 0 and req.count > 1:
+            log.info(
+                "device %s refused a merged read of %d registers; reading blocks separately", name, req.count
+            )
+            runner.merge_gap = 0
+        else:
+            return False
+        runner.plan = device_plan(runner.config, runner.max_read_registers, runner.merge_gap, runner.clock)
+        return True
+
+    def _fail(self, runner: DeviceRunner, exc: BaseException) -> None:
+        runner.failures += 1
+        runner.next_attempt = self._mono() + self._jitter(runner.failures)
+        message = str(exc)
+        if message != runner.last_error:
+            log.warning("device %s on bus %s: %s", runner.config.name, self.name, message)
+        runner.last_error = message
+        snap, runner.state = runner.processor.stale(runner.state, self._wall(), message)
+        self._publish(runner, snap)
+
+    # ------------------------------------------------------------------ loop
+    async def _connect(self) -> bool:
+        try:
+            await self.transport.connect()
+        except DeviceConnectionError as exc:
+            self.connect_failures += 1
+            for runner in self.runners:
+                await self.settle(runner)
+                runner.tally.read()
+                runner.tally.error("connection")
+                self._fail_quiet(runner, exc)
+            if self.connect_failures == 1 or math.log2(self.connect_failures).is_integer():
+                log.warning("bus %s: %s (attempt %d)", self.name, exc, self.connect_failures)
+            return False
+        if self.connect_failures:
+            log.info("bus %s: reconnected after %d failed attempts", self.name, self.connect_failures)
+        self.connect_failures = 0
+        for runner in self.runners:
+            runner.next_attempt = 0.0
+        return True
+
+    def _fail_quiet(self, runner: DeviceRunner, exc: BaseException) -> None:
+        runner.failures += 1
+        runner.last_error = str(exc)
+        snap, runner.state = runner.processor.stale(runner.state, self._wall(), str(exc))
+        self._publish(runner, snap)
+
+    async def poll_cycle(self) -> None:
+        """Poll every device that is due once (connecting first if needed)."""
+        if not self.transport.connected and not await self._connect():
+            return
+        for runner in self.runners:
+            if self._mono() < runner.next_attempt:
+                continue
+            try:
+                await self.poll_device(runner)
+            except DeviceConnectionError:
+                await self.transport.close()
+                return
+
+    async def run(self) -> None:
+        """Poll forever (until cancelled)."""
+        interval = float(self.bus.poll_interval_s)
+        next_cycle = self._mono()
+        while not self._stopping:
+            try:
+                await self.poll_cycle()
+            except asyncio.CancelledError:
+                raise
+            except Exception:  # the loop must survive anything
+                log.exception("bus %s: unexpected error in the poll cycle", self.name)
+                with contextlib.suppress(Exception):
+                    await self.transport.close()
+            now = self._mono()
+            if not self.transport.connected:
+                delay = self._jitter(self.connect_failures or 1)
+                next_cycle = now + delay
+            else:
+                next_cycle += interval
+                if next_cycle < now:  # overran: start again from now, no catch-up burst
+                    next_cycle = now
+            await asyncio.sleep(max(0.0, next_cycle - now))
+
+    def start(self) -> None:
+        self._stopping = False
+        self.task = asyncio.create_task(self.run(), name=f"tactile-bus-{self.name}")
+
+    async def stop(self) -> None:
+        """End the task and close the transport. Cancels until the task is done: on Python
+        3.11 ``asyncio.wait_for`` (used inside pymodbus) can swallow a cancellation that
+        races with a response, so one ``cancel()`` is not always enough; the stop flag
+        ends the loop in that case too."""
+        self._stopping = True
+        task, self.task = self.task, None
+        while task is not None and not task.done():
+            task.cancel()
+            await asyncio.wait({task}, timeout=1.0)
+        if task is not None and not task.cancelled() and task.exception() is not None:
+            log.error("bus %s: poll task failed", self.name, exc_info=task.exception())
+        await self.close()
+
+    async def close(self) -> None:
+        """Apply the conversions in flight, end the converter thread, close the transport."""
+        for runner in self.runners:
+            await self.settle(runner)
+        executor, self._executor = self._executor, None
+        if executor is not None:
+            executor.shutdown(wait=True)  # idle after settle(): joins the thread at once
+        await self.transport.close()
+
+
+class Poller:
+    """All buses of a ``GatewayConfig``: start, reload, stop, and a single-shot poll."""
+
+    def __init__(
+        self,
+        config: GatewayConfig,
+        holder: SnapshotHolder | None = None,
+        *,
+        transport_factory: Callable[[BusConfig], ModbusTransport] = ModbusTransport,
+        rng: random.Random | None = None,
+        wall_clock: Callable[[], float] = time.time,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.config = config
+        self.holder = holder or SnapshotHolder()
+        self._transport_factory = transport_factory
+        self._rng = rng or random.Random()
+        self._wall = wall_clock
+        self._mono = monotonic
+        self._devices: dict[str, DeviceSnapshot] = {}
+        self._counters: dict[str, DeviceCounters] = {}
+        self._sequence = 0
+        self.workers: list[BusWorker] = self._build(config, {})
+        self.running = False
+
+    # ------------------------------------------------------------------ building
+    def _build(self, config: GatewayConfig, old: dict[str, DeviceRunner]) -> list[BusWorker]:
+        workers = []
+        for bus in config.buses:
+            runners = []
+            for dev in bus.devices:
+                processor = DeviceProcessor(dev, bus.name, bus.poll_interval_s)
+                previous = old.get(dev.name)
+                if previous is None:
+                    state, tally = processor.initial_state(), Tally()
+                else:
+                    state = processor.carry_state(previous.processor, previous.state)
+                    tally = previous.tally
+                # what was learnt about the device (no clock, no merged reads) carries over
+                gap = MERGE_GAP if previous is None else previous.merge_gap
+                clock = True if previous is None else previous.clock
+                plan = device_plan(dev, bus.max_read_registers, gap, clock)
+                runners.append(
+                    DeviceRunner(
+                        dev,
+                        processor,
+                        plan,
+                        state,
+                        tally=tally,
+                        max_read_registers=bus.max_read_registers,
+                        merge_gap=gap,
+                        clock=clock,
+                    )
+                )
+            workers.append(
+                BusWorker(
+                    bus,
+                    runners,
+                    self._on_device_snapshot,
+                    transport_factory=self._transport_factory,
+                    rng=self._rng,
+                    wall_clock=self._wall,
+                    monotonic=self._mono,
+                )
+            )
+        return workers
+
+    def runners(self) -> Iterable[DeviceRunner]:
+        for w in self.workers:
+            yield from w.runners
+
+    def _on_device_snapshot(self, runner: DeviceRunner, snap: DeviceSnapshot) -> None:
+        self._devices[runner.config.name] = snap
+        self._counters[runner.config.name] = runner.counters
+        self._publish_all()
+
+    def _publish_all(self) -> None:
+        self._sequence += 1
+        self.holder.publish(GatewaySnapshot.build(self._devices, self._counters, self._sequence))
+
+    def _seed_snapshots(self) -> None:
+        """Before the first poll every device is listed as stale (never polled)."""
+        names = {r.config.name for r in self.runners()}
+        for name in list(self._devices):
+            if name not in names:
+                del self._devices[name]
+                self._counters.pop(name, None)
+        for runner in self.runners():
+            if runner.config.name not in self._devices:
+                snap, runner.state = runner.processor.stale(runner.state, self._wall(), "not polled yet")
+                self._devices[runner.config.name] = snap
+            elif runner.state.last is None:
+                snap, _ = runner.processor.stale(runner.state, self._wall(), "not polled yet")
+                self._devices[runner.config.name] = snap
+            self._counters[runner.config.name] = runner.counters
+        self._publish_all()
+
+    # ------------------------------------------------------------------ lifecycle
+    async def start(self) -> None:
+        """Start one task per bus."""
+        if self.running:
+            return
+        self._seed_snapshots()
+        for w in self.workers:
+            w.start()
+        self.running = True
+
+    async def stop(self) -> None:
+        """Cancel the bus tasks and close every transport (idempotent)."""
+        self.running = False
+        await asyncio.gather(*(w.stop() for w in self.workers), return_exceptions=True)
+
+    async def __aenter__(self) -> Poller:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.stop()
+
+    async def reload(self, config: GatewayConfig) -> ReloadReport:
+        """Replace the configuration. Channels whose physics is unchanged keep their creep
+        state; counters of devices that stay are kept. Buses reconnect."""
+        was_running = self.running
+        await self.stop()
+        old = {r.config.name: r for r in self.runners()}
+        workers = self._build(config, old)
+        new_runners = {r.config.name: r for w in workers for r in w.runners}
+        kept = reset = 0
+        for name, runner in new_runners.items():
+            n = len(runner.processor.channels)
+            k = runner.processor.kept_channels(old[name].processor) if name in old else 0
+            kept += k
+            reset += n - k
+        report = ReloadReport(
+            devices_added=tuple(sorted(set(new_runners) - set(old))),
+            devices_removed=tuple(sorted(set(old) - set(new_runners))),
+            channels_kept=kept,
+            channels_reset=reset,
+        )
+        self.config = config
+        self.workers = workers
+        self._seed_snapshots()
+        if was_running:
+            for w in self.workers:
+                w.start()
+            self.running = True
+        log.info(
+            "configuration reloaded: %d channels keep their creep state, %d start relaxed; "
+            "devices added %s, removed %s",
+            kept,
+            reset,
+            list(report.devices_added),
+            list(report.devices_removed),
+        )
+        return report
+
+    async def poll_once(self) -> GatewaySnapshot:
+        """Connect every bus, poll each device once (with retries), close; buses in parallel."""
+        self._seed_snapshots()
+
+        async def one(worker: BusWorker) -> None:
+            try:
+                await worker.poll_cycle()
+            finally:
+                await worker.close()
+
+        await asyncio.gather(*(one(w) for w in self.workers))
+        return self.holder.get()
+
+    def snapshot(self) -> GatewaySnapshot:
+        return self.holder.get()

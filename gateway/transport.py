@@ -1,0 +1,383 @@
+"""Modbus transport of one bus: the only gateway module that imports pymodbus.
+
+One ``ModbusTransport`` per bus (TCP, RTU on a serial line, RTU framing over TCP, or Modbus
+TCP over TLS). It sends one request at a time (a serial line is half duplex; on TCP it
+keeps the device's view simple) and turns every pymodbus outcome into the gateway's own
+errors:
+
+* an exception response -> ``DeviceExceptionResponse`` (with the Modbus exception code);
+* no answer in ``timeout_s`` -> ``DeviceTimeoutError``;
+* bytes came back but no valid frame (bad CRC, garbage), a wrong register count or the
+  wrong function -> ``DecodeError``;
+* a connection that cannot be made or is lost -> ``DeviceConnectionError``.
+
+pymodbus' own retries and automatic reconnection are switched off: the poller retries and
+reconnects with its own bounded, jittered back-off.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import logging
+import ssl
+from collections.abc import Awaitable, Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, AsyncModbusTlsClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+from pymodbus.framer import FramerType
+
+from .errors import (
+    DecodeError,
+    DeviceConnectionError,
+    DeviceError,
+    DeviceExceptionResponse,
+    DeviceTimeoutError,
+    GatewayError,
+    WriteNotAllowedError,
+)
+
+if TYPE_CHECKING:
+    from .config import BusConfig, TlsConfig
+
+log = logging.getLogger(__name__)
+
+#: Modbus function codes used here.
+FC_READ_HOLDING = 0x03
+FC_READ_INPUT = 0x04
+FC_WRITE_MULTIPLE = 0x10
+FC_DEVICE_ID = 0x2B
+#: Most registers one read may ask for (Modbus application protocol, function 3/4).
+MAX_READ_COUNT = 125
+MAX_WRITE_COUNT = 123
+
+#: Read Device Identification object ids (MEI type 14).
+DEVICE_ID_OBJECTS: dict[int, str] = {
+    0x00: "VendorName",
+    0x01: "ProductCode",
+    0x02: "MajorMinorRevision",
+    0x03: "VendorUrl",
+    0x04: "ProductName",
+    0x05: "ModelName",
+    0x06: "UserApplicationName",
+}
+
+EXCEPTION_NAMES: dict[int, str] = {
+    1: "illegal function",
+    2: "illegal data address",
+    3: "illegal data value",
+    4: "server device failure",
+    5: "acknowledge",
+    6: "server device busy",
+    8: "memory parity error",
+    10: "gateway path unavailable",
+    11: "gateway target device failed to respond",
+}
+
+
+def build_ssl_context(tls: TlsConfig) -> ssl.SSLContext:
+    """Client TLS context: trust ``ca_file``, present ``cert_file``/``key_file`` if given.
+
+    Certificate and host-name verification are on unless the config sets ``verify = false``.
+    """
+    ctx = ssl.create_default_context(
+        ssl.Purpose.SERVER_AUTH, cafile=str(tls.ca_file) if tls.ca_file else None
+    )
+    ctx.minimum_version = ssl.TLSVersion.TLSv1_2
+    if tls.cert_file:
+        ctx.load_cert_chain(str(tls.cert_file), str(tls.key_file) if tls.key_file else None)
+    if not tls.verify:
+        log.warning("TLS certificate verification is switched off by the configuration")
+        ctx.check_hostname = False
+        ctx.verify_mode = ssl.CERT_NONE
+    return ctx
+
+
+class ModbusTransport:
+    """Asynchronous Modbus client of one bus (see the module docstring)."""
+
+    def __init__(self, bus: BusConfig) -> None:
+        self.bus = bus
+        self.name = bus.name
+        self.timeout_s = float(bus.timeout_s)
+        self._client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None
+        self._lock = asyncio.Lock()
+        self._rx_seen = False
+        self._connect_error: BaseException | None = None
+        self._ssl_context: ssl.SSLContext | None = None
+        if bus.kind == "tls":
+            if bus.tls is None:
+                raise GatewayError(f"bus {bus.name!r}: kind 'tls' needs a [tls] table")
+            self._ssl_context = build_ssl_context(bus.tls)
+
+    @classmethod
+    def from_bus(cls, bus: BusConfig) -> ModbusTransport:
+        return cls(bus)
+
+    # ------------------------------------------------------------------ connection
+    @property
+    def target(self) -> str:
+        b = self.bus
+        if b.kind == "rtu":
+            return f"{b.serial_port} ({b.baudrate} baud)"
+        return f"{b.host}:{b.port} ({b.kind})"
+
+    @property
+    def connected(self) -> bool:
+        return self._client is not None and bool(self._client.connected)
+
+    @property
+    def is_serial_framing(self) -> bool:
+        """True when frames carry no transaction id (RTU): a late answer could be misread."""
+        return self.bus.kind in ("rtu", "rtu-over-tcp")
+
+    def _make_client(self) -> AsyncModbusTcpClient | AsyncModbusSerialClient:
+        b = self.bus
+        common: dict[str, Any] = {
+            "name": b.name,
+            "reconnect_delay": 0,  # no automatic reconnection: the poller does it
+            "timeout": self.timeout_s,
+            "retries": 0,  # no library retries: the poller does them
+            "trace_packet": self._trace_packet,
+            "trace_connect": self._trace_connect,
+        }
+        client: AsyncModbusTcpClient | AsyncModbusSerialClient
+        port = int(b.port or (802 if b.kind == "tls" else 502))
+        if b.kind == "tcp":
+            client = AsyncModbusTcpClient(
+                str(b.host),
+                port=port,
+                framer=FramerType.SOCKET,
+                **common,
+            )
+        elif b.kind == "rtu-over-tcp":
+            client = AsyncModbusTcpClient(
+                str(b.host),
+                port=port,
+                framer=FramerType.RTU,
+                **common,
+            )
+        elif b.kind == "tls":
+            assert self._ssl_context is not None
+            client = AsyncModbusTlsClient(
+                str(b.host),
+                port=port,
+                sslctx=self._ssl_context,
+                **common,
+            )
+            tls = b.tls
+            if tls is not None and tls.server_hostname:
+                # pymodbus verifies against ``host``; the config may name another identity
+                create_tls: Any = client.ctx.call_create
+                client.ctx.call_create = functools.partial(create_tls, server_hostname=tls.server_hostname)
+        elif b.kind == "rtu":
+            client = AsyncModbusSerialClient(
+                str(b.serial_port),
+                framer=FramerType.RTU,
+                baudrate=int(b.baudrate),
+                bytesize=int(b.bytesize),
+                parity=str(b.parity),
+                stopbits=int(b.stopbits),
+                **common,
+            )
+        else:
+            raise GatewayError(f"bus {b.name!r}: unknown kind {b.kind!r}")
+        inner: Callable[[], Awaitable[Any]] = client.ctx.call_create
+
+        async def create() -> Any:
+            try:
+                return await inner()
+            except BaseException as exc:
+                self._connect_error = exc
+                raise
+
+        client.ctx.call_create = create
+        return client
+
+    async def connect(self) -> None:
+        """Open the connection (or serial port); ``DeviceConnectionError`` on failure."""
+        await self.close()
+        self._connect_error = None
+        try:
+            client = self._make_client()
+        except (OSError, ValueError) as exc:
+            raise DeviceConnectionError(f"bus {self.name!r}: cannot open {self.target}: {exc}") from exc
+        self._client = client
+        try:
+            ok = await client.connect()
+            if ok and self.bus.kind == "rtu":
+                # the serial transport finishes its set-up on the next loop iterations
+                for _ in range(3):
+                    await asyncio.sleep(0)
+                ok = bool(client.connected)
+        except (OSError, ModbusException) as exc:
+            self._connect_error = exc
+            ok = False
+        if not ok or not client.connected:
+            reason = self._connect_error or "no connection"
+            await self.close()
+            raise DeviceConnectionError(f"bus {self.name!r}: cannot connect to {self.target}: {reason}")
+        log.info("bus %s: connected to %s", self.name, self.target)
+
+    async def close(self) -> None:
+        """Close the connection; safe to call at any time and more than once."""
+        client, self._client = self._client, None
+        if client is not None:
+            with contextlib.suppress(Exception):
+                client.close()
+            await asyncio.sleep(0)  # let the transport's close callbacks run
+
+    async def __aenter__(self) -> ModbusTransport:
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # ------------------------------------------------------------------ hooks
+    def _trace_packet(self, sending: bool, data: bytes) -> bytes:
+        if not sending and data:
+            self._rx_seen = True
+        return data
+
+    def _trace_connect(self, connected: bool) -> None:
+        if connected:
+            return
+        client = self._client
+        future = getattr(getattr(client, "ctx", None), "response_future", None)
+        if isinstance(future, asyncio.Future) and not future.done():
+            # fail the outstanding request now instead of waiting for its timeout
+            future.set_exception(ConnectionException(f"connection to {self.target} lost"))
+
+    # ------------------------------------------------------------------ requests
+    async def _execute(self, what: str, device_id: int, call: Callable[[Any], Awaitable[Any]]) -> Any:
+        if not 0 <= device_id <= 247:
+            raise GatewayError(f"device id {device_id} outside 0..247")
+        async with self._lock:
+            client = self._client
+            if client is None or not client.connected:
+                raise DeviceConnectionError(f"bus {self.name!r}: not connected to {self.target}")
+            self._rx_seen = False
+            try:
+                # pymodbus enforces timeout_s; the outer bound only guards against a hang
+                async with asyncio.timeout(2.0 * self.timeout_s + 1.0):
+                    response = await call(client)
+            except ConnectionException as exc:
+                raise DeviceConnectionError(f"{what}: connection to {self.target} lost: {exc}") from exc
+            except ModbusIOException as exc:
+                raise self._classify_io(what, exc) from exc
+            except TimeoutError as exc:
+                raise self._timeout(what) from exc
+            except OSError as exc:
+                raise DeviceConnectionError(f"{what}: {self.target}: {exc}") from exc
+            except ModbusException as exc:
+                raise DecodeError(f"{what}: invalid response from {self.target}: {exc}") from exc
+            if response is None:
+                raise self._timeout(what)
+            if response.isError():
+                code = int(getattr(response, "exception_code", 0) or 0)
+                name = EXCEPTION_NAMES.get(code, "unknown exception")
+                raise DeviceExceptionResponse(f"{what}: device answered exception {code} ({name})", code)
+            return response
+
+    def _timeout(self, what: str) -> DeviceError:
+        if self._rx_seen:
+            return DecodeError(f"{what}: garbled answer from {self.target} (bytes but no valid frame)")
+        return DeviceTimeoutError(f"{what}: no answer from {self.target} within {self.timeout_s:g} s")
+
+    def _classify_io(self, what: str, exc: ModbusIOException) -> DeviceError:
+        text = str(exc)
+        if "No response" in text:
+            return self._timeout(what)
+        if not self.connected:
+            return DeviceConnectionError(f"{what}: connection to {self.target} lost: {text}")
+        return DecodeError(f"{what}: invalid response from {self.target}: {text}")
+
+    @staticmethod
+    def _check_read(what: str, response: Any, function_code: int, count: int) -> list[int]:
+        """The registers of a read answer; a wrong function or count is a ``DecodeError``.
+
+        pymodbus decodes each register from two bytes, so values are always 0..65535.
+        """
+        if response.function_code != function_code:
+            raise DecodeError(f"{what}: answer has function {response.function_code}")
+        registers: list[int] = getattr(response, "registers", None) or []
+        if len(registers) != count:
+            raise DecodeError(f"{what}: asked for {count} registers, got {len(registers)}")
+        return registers
+
+    @staticmethod
+    def _check_range(address: int, count: int, limit: int) -> None:
+        if not 1 <= count <= limit:
+            raise GatewayError(f"register count {count} outside 1..{limit}")
+        if not 0 <= address <= 0xFFFF or address + count > 0x10000:
+            raise GatewayError(f"register range {address}..{address + count - 1} outside 0..65535")
+
+    async def read_input_registers(self, device_id: int, address: int, count: int) -> list[int]:
+        """Function 4: ``count`` input registers from ``address`` (values 0..65535)."""
+        self._check_range(address, count, MAX_READ_COUNT)
+        what = f"read input {address}+{count} of device {device_id} on {self.name!r}"
+        response = await self._execute(
+            what,
+            device_id,
+            lambda c: c.read_input_registers(address, count=count, device_id=device_id),
+        )
+        return self._check_read(what, response, FC_READ_INPUT, count)
+
+    async def read_holding_registers(self, device_id: int, address: int, count: int) -> list[int]:
+        """Function 3: ``count`` holding registers from ``address``."""
+        self._check_range(address, count, MAX_READ_COUNT)
+        what = f"read holding {address}+{count} of device {device_id} on {self.name!r}"
+        response = await self._execute(
+            what,
+            device_id,
+            lambda c: c.read_holding_registers(address, count=count, device_id=device_id),
+        )
+        return self._check_read(what, response, FC_READ_HOLDING, count)
+
+    async def write_registers(
+        self, device_id: int, address: int, values: Sequence[int], allow_write: bool
+    ) -> None:
+        """Function 16. Refused with ``WriteNotAllowedError`` before anything is sent unless
+        the device's configuration allows writes."""
+        if not allow_write:
+            raise WriteNotAllowedError(
+                f"write to registers {address}.. of device {device_id} on bus {self.name!r} refused: "
+                "the device configuration does not set allow_write = true"
+            )
+        regs = [int(v) for v in values]
+        self._check_range(address, len(regs), MAX_WRITE_COUNT)
+        if any(not 0 <= v <= 0xFFFF for v in regs):
+            raise GatewayError("register values must be in 0..65535")
+        what = f"write {address}+{len(regs)} of device {device_id} on {self.name!r}"
+        response = await self._execute(
+            what, device_id, lambda c: c.write_registers(address, regs, device_id=device_id)
+        )
+        if getattr(response, "function_code", None) != FC_WRITE_MULTIPLE:
+            raise DecodeError(f"{what}: answer has function {getattr(response, 'function_code', None)}")
+
+    async def read_device_identification(self, device_id: int) -> dict[str, str]:
+        """Function 43/14 (regular objects): e.g. VendorName, ProductCode, ModelName."""
+        what = f"read device identification of device {device_id} on {self.name!r}"
+        info: dict[str, str] = {}
+        object_id = 0
+        for _ in range(8):  # "more follows" continuation, bounded
+            oid = object_id
+
+            def request(c: Any, oid: int = oid) -> Awaitable[Any]:
+                return c.read_device_information(read_code=0x02, object_id=oid, device_id=device_id)
+
+            response = await self._execute(what, device_id, request)
+            objects = getattr(response, "information", None)
+            if not isinstance(objects, dict):
+                raise DecodeError(f"{what}: answer carries no objects")
+            for key, value in objects.items():
+                name = DEVICE_ID_OBJECTS.get(int(key), f"object_{int(key):#04x}")
+                raw = value if isinstance(value, bytes | bytearray) else str(value).encode()
+                info[name] = bytes(raw).decode("utf-8", errors="replace")
+            if not getattr(response, "more_follows", 0):
+                break
+            object_id = int(getattr(response, "next_object_id", 0))
+        return info
