@@ -65,8 +65,12 @@ class PaperResult:
     true: SensorParams
 
 
-def _holds(channel: ChannelRecord, level_n: float) -> tuple[FloatArray, FloatArray]:
-    """Time since onset and resistance of the (first) hold at ``level_n``."""
+def _holds(channel: ChannelRecord, level_n: float) -> tuple[FloatArray, FloatArray, float]:
+    """Time since the first sample, resistance, and the sampling gap before the hold.
+
+    The step happened somewhere between the last sample before the hold and its first
+    sample; that gap bounds the unknown onset.
+    """
     assert channel.force_n is not None
     at = np.abs(channel.force_n - level_n) < 1e-6
     idx = np.flatnonzero(at)
@@ -76,13 +80,18 @@ def _holds(channel: ChannelRecord, level_n: float) -> tuple[FloatArray, FloatArr
     first = idx[: breaks[0] + 1] if breaks.size else idx
     t = channel.time_s[first]
     r = channel.resistance_ohm[first]
+    gap = float(t[0] - channel.time_s[first[0] - 1]) if first[0] > 0 else 0.0
     ok = np.isfinite(r)
-    return t[ok] - t[0], r[ok]
+    return t[ok] - t[0], r[ok], gap
 
 
 def fit_hold(channel: ChannelRecord, level_n: float, known: SensorParams) -> HoldFit:
-    """Fit constant E0, E1, mu1 at one force to its creep test with eq. 17."""
-    t, r = _holds(channel, level_n)
+    """Fit constant E0, E1, mu1 at one force to its creep test with eq. 17.
+
+    The load step's exact time is unknown between two samples, so the onset is a fourth
+    parameter bounded by that sampling gap.
+    """
+    t, r, gap = _holds(channel, level_n)
     base = replace(known, e0_slope_pa_per_n=0.0, e1_slope_pa_per_n=0.0, mu1_slope_pa_s_per_n=0.0)
 
     def model_r(x: FloatArray) -> FloatArray:
@@ -92,19 +101,21 @@ def fit_hold(channel: ChannelRecord, level_n: float, known: SensorParams) -> Hol
             e1_pa=known.e1_pa * math.exp(x[1]),
             mu1_pa_s=known.mu1_pa_s * math.exp(x[2]),
         )
-        return SensorModel(PAPER_EFFECTS, p).held_step(np.full(t.size, level_n), t).total_ohm
+        return SensorModel(PAPER_EFFECTS, p).held_step(np.full(t.size, level_n), t + x[3]).total_ohm
 
     def residual(x: FloatArray) -> FloatArray:
         return np.asarray(np.log(r) - np.log(model_r(x)))
 
-    fit = least_squares(residual, np.zeros(3), bounds=(-5.0, 5.0), x_scale="jac")
+    lower = np.array([-5.0, -5.0, -5.0, 0.0])
+    upper = np.array([5.0, 5.0, 5.0, max(gap, 1e-9)])
+    fit = least_squares(residual, np.array([0.0, 0.0, 0.0, gap / 2]), bounds=(lower, upper), x_scale="jac")
     return HoldFit(
         force_n=level_n,
         e0_pa=known.e0_pa * math.exp(fit.x[0]),
         e1_pa=known.e1_pa * math.exp(fit.x[1]),
         mu1_pa_s=known.mu1_pa_s * math.exp(fit.x[2]),
         log_rms=float(np.sqrt(np.mean(fit.fun**2))),
-        time_s=t,
+        time_s=t + fit.x[3],
         resistance_ohm=r,
     )
 

@@ -285,6 +285,7 @@ class DeviceSnapshot:
     peak_channel: str | None = None
     peak_force_n: float | None = None
     error: str | None = None  # why the last poll failed
+    temperature_c: FloatArray | None = None  # sensor temperature where the device reports it, degC
 
     @property
     def n_channels(self) -> int:
@@ -628,6 +629,9 @@ class DeviceProcessor:
             contact_area_mm2=q.contact_area_mm2,
             peak_channel=None if q.peak_index is None else self.names[q.peak_index],
             peak_force_n=q.peak_force_n,
+            temperature_c=None
+            if temperature is None
+            else _read_only(np.asarray(temperature, dtype=np.float64)),
         )
         new_state = DeviceState(new_state_model, now, host_time_s, use_device, snap)
         return snap, new_state

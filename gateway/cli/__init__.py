@@ -8,6 +8,7 @@ from .calibrate_cmd import calibrate_cmd
 from .config_cmd import channels, check_config
 from .discrepancy_cmd import discrepancy_cmd
 from .model_cmd import model
+from .record_cmd import paper, record
 from .run_cmd import demo, poll_once, run
 
 
@@ -25,5 +26,7 @@ main.add_command(discrepancy_cmd)
 main.add_command(run)
 main.add_command(poll_once)
 main.add_command(demo)
+main.add_command(record)
+main.add_command(paper)
 
 __all__ = ["main"]

@@ -1,0 +1,160 @@
+"""``tactile-gateway record`` and ``tactile-gateway paper``: live records, and the paper replayed."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import datetime
+import logging
+import signal
+import sys
+import time
+from pathlib import Path
+
+import click
+
+from ..config import GatewayConfig, RegisterMap, load_config
+from ..errors import ConfigError
+from ..poller import Poller, SnapshotHolder
+from ..recorder import LiveRecorder, RecorderStats, record_path_ok
+
+
+def _progress(elapsed_s: float, duration_s: float, stats: RecorderStats, final: bool = False) -> None:
+    width = 30
+    done = min(1.0, elapsed_s / duration_s) if duration_s > 0 else 1.0
+    bar = "#" * int(done * width) + "." * (width - int(done * width))
+    line = (
+        f"[{bar}] {elapsed_s:7.1f}/{duration_s:g} s  samples {stats.rows}  "
+        f"read errors {stats.read_errors}  skipped {stats.skipped_rows}"
+    )
+    if sys.stderr.isatty():
+        click.echo("\r" + line + ("\n" if final else ""), err=True, nl=False)
+    elif final:
+        click.echo(line, err=True)
+
+
+async def record_live(
+    config: GatewayConfig,
+    out_path: Path,
+    duration_s: float,
+    channels: list[str] | None = None,
+    device: str | None = None,
+    metadata: dict[str, str] | None = None,
+    show_progress: bool = True,
+) -> RecorderStats:
+    """Poll with ``config`` for ``duration_s`` seconds and write a record to ``out_path``."""
+    logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its errors reach us as read errors
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    handled = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(RuntimeError, ValueError, NotImplementedError):
+            loop.add_signal_handler(sig, stop.set)
+            handled.append(sig)
+    try:
+        with out_path.open("w", encoding="utf-8", newline="") as fh:
+            meta = {
+                "source": "tactile-gateway record",
+                "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+                **(metadata or {}),
+            }
+            recorder = LiveRecorder(fh, config, channels, meta, device=device)
+            holder = SnapshotHolder()
+            holder.subscribe(recorder)
+            t0 = time.monotonic()
+            async with Poller(config, holder):
+                while not stop.is_set() and (elapsed := time.monotonic() - t0) < duration_s:
+                    if show_progress:
+                        _progress(elapsed, duration_s, recorder.stats)
+                    with contextlib.suppress(TimeoutError):
+                        await asyncio.wait_for(stop.wait(), timeout=min(0.5, max(0.01, duration_s - elapsed)))
+            if show_progress:
+                _progress(min(time.monotonic() - t0, duration_s), duration_s, recorder.stats, final=True)
+            return recorder.stats
+    finally:
+        for sig in handled:
+            loop.remove_signal_handler(sig)
+
+
+@click.command("record")
+@click.option("-c", "--config", "config_path", required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--duration", "duration_s", required=True, type=click.FloatRange(min=0.0), help="seconds")
+@click.option("--out", "out_path", required=True, type=click.Path(path_type=Path), help="record CSV to write")
+@click.option("--channels", default=None, help="comma-separated channel names (default: all)")
+def record(config_path: Path, duration_s: float, out_path: Path, channels: str | None) -> None:
+    """Write a measurement record from live polls (reference force and temperature where available)."""
+    try:
+        config = load_config(config_path)
+        record_path_ok(out_path)
+    except (ConfigError, ValueError) as exc:
+        raise click.UsageError(str(exc)) from None
+    names = [c.strip() for c in channels.split(",") if c.strip()] if channels else None
+    known = {c.name for bus in config.buses for d in bus.devices for c in d.channels}
+    known |= {f"{d.name}/{c.name}" for bus in config.buses for d in bus.devices for c in d.channels}
+    for name in names or []:
+        if name not in known:
+            raise click.UsageError(f"no channel {name!r} in {config_path}")
+    stats = asyncio.run(
+        record_live(config, out_path, duration_s, names, metadata={"config": str(config_path)})
+    )
+    click.echo(
+        f"wrote {stats.rows} samples from {stats.polls} polls to {out_path} ({stats.read_errors} read errors)"
+    )
+
+
+async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, object]:
+    from sim_device import ArrayConfig, SimArray, serve_tcp
+
+    from ..model import Divider
+    from .run_cmd import bus_config_for, device_config_for, gateway_config_for
+
+    creep_cfg = ArrayConfig(channels=1, columns=1, seed=7, scenario="creep-test", speed=speed)
+    stair_cfg = creep_cfg.with_changes(scenario="staircase", speed=speed / 10.0)
+    creep, stair = SimArray(creep_cfg, device_id=1), SimArray(stair_cfg, device_id=2)
+    bench = RegisterMap(force_reference_address=1000, temperature_address=1600)
+    divider = Divider(creep_cfg.supply_v, creep_cfg.reference_ohm, creep_cfg.adc_bits)
+    creep_path, stair_path = out_dir / "creep_tests.csv", out_dir / "staircase.csv"
+    async with serve_tcp([creep, stair], host="127.0.0.1", port=0) as sim:
+        devices = [
+            device_config_for("creep", 1, creep.channel_params, 1, 2.5, divider=divider, registers=bench),
+            device_config_for("staircase", 2, stair.channel_params, 1, 2.5, divider=divider, registers=bench),
+        ]
+        bus = bus_config_for("sim", "tcp", devices, host="127.0.0.1", port=sim.port, poll_interval_s=0.02)
+        config = gateway_config_for([bus])
+        durations = (
+            (creep.scenario.duration_s or 4810.0) / creep_cfg.speed,
+            (stair.scenario.duration_s or 610.0) / stair_cfg.speed,
+        )
+        await asyncio.gather(
+            record_live(config, creep_path, durations[0], device="creep", show_progress=False),
+            record_live(config, stair_path, durations[1], device="staircase", show_progress=False),
+        )
+    return creep_path, stair_path, creep.channel_params[0]
+
+
+@click.command("paper")
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--speed",
+    type=click.FloatRange(min=10.0, max=2000.0),
+    default=200.0,
+    show_default=True,
+    help="simulated clock speed of the creep tests (the staircase runs 10x slower)",
+)
+def paper(out_dir: Path, speed: float) -> None:
+    """Replay the paper's experiments on the simulated array, end to end through Modbus."""
+    from ..model import SensorParams
+    from ..paper import analyze, write_outputs
+    from ..records import read_record
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    click.echo(f"recording the creep tests and a staircase through Modbus (about {4810 / speed:.0f} s) ...")
+    creep_path, stair_path, true = asyncio.run(_paper_records(out_dir, speed))
+    assert isinstance(true, SensorParams)
+    creep = read_record(creep_path, require_force=True).channel()
+    stair = read_record(stair_path, require_force=True).channel()
+    result = analyze(creep, stair, true)
+    for path in write_outputs(
+        result, out_dir, f"{creep_path.name}, {stair_path.name} (recorded through Modbus)"
+    ):
+        click.echo(str(path))

@@ -1,0 +1,130 @@
+"""Live measurement records: rows from the gateway's polls, flushed as they come.
+
+Each good poll of a device adds one row per channel to a record in the format of
+``shared/spec/measurement-records.md``: the device clock (``time_s``, from the start of the
+recording), the resistance the gateway read (``inf`` for an open contact), and the
+reference force and temperature where the device provides them (a bench's load cell, or
+the simulated array's bench registers). The header is written first and every poll's rows
+are flushed, so an interrupted recording is a valid record of everything read so far.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Collection, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+from .config import GatewayConfig
+from .pipeline import ChannelStatus, GatewaySnapshot
+
+_WITH_VALUE = {int(ChannelStatus.OK), int(ChannelStatus.NO_CONTACT), int(ChannelStatus.SATURATED)}
+_OPEN = int(ChannelStatus.OPEN)
+
+
+@dataclass
+class RecorderStats:
+    polls: int = 0
+    rows: int = 0
+    skipped_rows: int = 0  # channels without a value in a good poll (short, error)
+    read_errors: int = 0
+
+
+class LiveRecorder:
+    """Turns published snapshots into record rows (thread-safe; bus threads may publish)."""
+
+    def __init__(
+        self,
+        out: TextIO,
+        config: GatewayConfig,
+        channels: Collection[str] | None = None,
+        metadata: Mapping[str, str] | None = None,
+        device: str | None = None,
+    ) -> None:
+        self.out = out
+        self._device = device
+        self.stats = RecorderStats()
+        self._lock = threading.Lock()
+        devices = [d for bus in config.buses for d in bus.devices if device is None or d.name == device]
+        if not devices:
+            raise ValueError(f"no device {device!r} in the configuration")
+        self._multi = len(devices) > 1
+        self._wanted = set(channels) if channels else None
+        self._has_force = any(d.registers.force_reference_address is not None for d in devices)
+        self._has_temp = any(d.registers.temperature_address is not None for d in devices)
+        self._last: dict[str, float] = {}
+        self._t0: dict[str, float] = {}
+        self._errors: dict[str, int] = {}
+        for key, value in (metadata or {}).items():
+            out.write(f"# {key}: {value}\n")
+        cols = ["time_s", "channel", "resistance_ohm"]
+        cols += ["force_n"] if self._has_force else []
+        cols += ["temperature_c"] if self._has_temp else []
+        out.write(",".join(cols) + "\n")
+        out.flush()
+
+    def label(self, device: str, channel: str) -> str:
+        return f"{device}/{channel}" if self._multi else channel
+
+    def wanted(self, device: str, channel: str) -> bool:
+        return self._wanted is None or channel in self._wanted or self.label(device, channel) in self._wanted
+
+    def __call__(self, snapshot: GatewaySnapshot) -> None:
+        with self._lock:
+            self._take(snapshot)
+
+    def _take(self, snapshot: GatewaySnapshot) -> None:
+        lines: list[str] = []
+        for name, counters in snapshot.counters.items():
+            if self._device is not None and name != self._device:
+                continue
+            errors = sum(counters.read_errors_total.values())
+            self.stats.read_errors += errors - self._errors.get(name, 0)
+            self._errors[name] = errors
+        for name, dev in snapshot.devices.items():
+            if self._device is not None and name != self._device:
+                continue
+            if not dev.up or dev.last_success_timestamp_s is None:
+                continue
+            clock = dev.device_time_s if dev.device_time_s is not None else dev.last_success_timestamp_s
+            if self._last.get(name) == dev.last_success_timestamp_s:
+                continue  # this device was not polled again since the last rows
+            self._last[name] = dev.last_success_timestamp_s
+            t0 = self._t0.setdefault(name, clock)
+            self.stats.polls += 1
+            for k, channel in enumerate(dev.channel_names):
+                if not self.wanted(name, channel):
+                    continue
+                status = int(dev.status[k])
+                r = float(dev.resistance_ohm[k])
+                if status == _OPEN or (status in _WITH_VALUE and not math.isfinite(r)):
+                    r = math.inf  # an open circuit (the contact is open at rest)
+                elif status not in _WITH_VALUE or not (math.isfinite(r) and r > 0.0):
+                    self.stats.skipped_rows += 1
+                    continue
+                fields = [f"{clock - t0:.6f}", self.label(name, channel), "inf" if math.isinf(r) else repr(r)]
+                if self._has_force:
+                    f = float(dev.reference_force_n[k])
+                    fields.append(repr(max(f, 0.0)) if math.isfinite(f) else "")
+                if self._has_temp:
+                    temps = dev.temperature_c
+                    t = float(temps[k]) if temps is not None else math.nan
+                    fields.append(repr(t) if math.isfinite(t) else "")
+                if "" in fields:
+                    self.stats.skipped_rows += 1
+                    continue
+                lines.append(",".join(fields))
+        if lines:
+            self.out.write("\n".join(lines) + "\n")
+            self.out.flush()
+            self.stats.rows += len(lines)
+
+
+def record_path_ok(path: Path) -> None:
+    """Refuse to overwrite a directory or write into a missing one (clear messages)."""
+    if path.is_dir():
+        raise ValueError(f"{path} is a directory")
+    if not path.parent.exists():
+        raise ValueError(f"directory {path.parent} does not exist")
