@@ -7,14 +7,8 @@ a time and reads both. The drift check of the TCP test is repeated over the seri
 from __future__ import annotations
 
 import asyncio
-import shutil
-import signal
-import subprocess
 import time
-from collections.abc import Iterator
-from pathlib import Path
 
-import pytest
 from test_gateway_tcp import Recorder, array_device, drift_errors, holds_array, report, until
 
 from gateway.cli.run_cmd import bus_config_for, gateway_config_for
@@ -24,37 +18,6 @@ from gateway.transport import ModbusTransport
 from sim_device import ArrayConfig, SimArray, serve_serial
 
 BAUD = 115200
-
-
-@pytest.fixture
-def pty_pair(tmp_path: Path) -> Iterator[tuple[str, str]]:
-    """Two linked pseudo-terminals from socat: (gateway side, device side)."""
-    socat = shutil.which("socat")
-    if socat is None:
-        pytest.fail("socat is not installed: `make test` installs it (Debian package socat)")
-    a, b = tmp_path / "a", tmp_path / "b"
-    proc = subprocess.Popen(
-        [socat, "-d", "-d", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-    )
-    try:
-        deadline = time.monotonic() + 10.0
-        while not (a.exists() and b.exists()):
-            if proc.poll() is not None or time.monotonic() > deadline:
-                err = proc.stderr.read().decode() if proc.stderr else ""
-                pytest.fail(f"socat did not create the pty pair: {err}")
-            time.sleep(0.02)
-        yield str(a), str(b)
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        if proc.stderr:
-            proc.stderr.close()
 
 
 async def test_holds_drift_corrected_over_rtu(pty_pair: tuple[str, str]) -> None:

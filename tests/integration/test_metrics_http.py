@@ -9,7 +9,6 @@ import json
 import math
 import os
 import signal
-import socket
 import ssl
 import subprocess
 import sys
@@ -23,6 +22,7 @@ from pathlib import Path
 import bcrypt
 import pytest
 from click.testing import CliRunner
+from netutil import free_port
 from prometheus_client import CollectorRegistry
 from prometheus_client.parser import text_string_to_metric_families
 from test_gateway_tcp import array_device
@@ -34,12 +34,6 @@ from gateway.poller import Poller, SnapshotHolder
 from sim_device import ArrayConfig, SimArray, serve_tcp
 
 GATEWAY = [sys.executable, "-c", "from gateway.cli import main; main()"]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def get(

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import socket
 import subprocess
 import sys
 import time
@@ -22,15 +21,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from netutil import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _wait(what: str, check: Callable[[], Any], timeout_s: float = 30.0) -> Any:
@@ -100,7 +94,7 @@ def procs(tmp_path: Path) -> Iterator[Processes]:
 def test_prometheus_scrapes_gateway_and_sees_the_device_go_down(tmp_path: Path, procs: Processes) -> None:
     prometheus = shutil.which("prometheus")
     assert prometheus, "Debian's prometheus is not installed: run `make test`, which installs it"
-    sim_port, metrics_port, prom_port = _free_port(), _free_port(), _free_port()
+    sim_port, metrics_port, prom_port = free_port(), free_port(), free_port()
 
     scenario = tmp_path / "constant.toml"
     scenario.write_text(

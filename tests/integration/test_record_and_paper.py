@@ -14,18 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from netutil import free_port
 
 from gateway.discrepancy import run_discrepancy
 from gateway.records import read_record
 from sim_device import ArrayConfig, record_offline
 
 BIN = Path(sys.executable).parent
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _wait_port(port: int, timeout_s: float = 20.0) -> None:
@@ -65,7 +60,7 @@ temperature_address = 1600
 
 @pytest.fixture
 def sim(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[int]:
-    port = _free_port()
+    port = free_port()
     args: list[str] = request.param
     proc = subprocess.Popen(
         [str(BIN / "tactile-sim"), "run", "--tcp", f"127.0.0.1:{port}", *args],

@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import asyncio
 import shutil
-import signal
 import ssl
 import subprocess
 import threading
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import numpy as np
@@ -40,34 +39,6 @@ async def no_leaked_tasks() -> AsyncIterator[None]:
     leaked = [t for t in asyncio.all_tasks() - before if t is not asyncio.current_task() and not t.done()]
     assert not leaked, f"tasks left behind: {leaked}"
     assert threading.active_count() == threads, "threads left behind"
-
-
-@pytest.fixture
-def pty_pair(tmp_path: Path) -> Iterator[tuple[str, str]]:
-    """Two connected pseudo terminals from socat; socat is stopped at teardown."""
-    socat = shutil.which("socat")
-    if socat is None:
-        pytest.fail("socat is missing: `make test` installs it (make sysdeps, Debian package socat)")
-    a, b = tmp_path / "a", tmp_path / "b"
-    proc = subprocess.Popen(
-        [socat, "-d", "-d", f"pty,raw,echo=0,link={a}", f"pty,raw,echo=0,link={b}"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    try:
-        deadline = time.monotonic() + 5.0
-        while not (a.exists() and b.exists()):
-            if proc.poll() is not None or time.monotonic() > deadline:
-                pytest.fail(f"socat did not create the pty pair (exit code {proc.poll()})")
-            time.sleep(0.01)
-        yield str(a), str(b)
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
 
 
 async def tcp_client(port: int, **options: object) -> AsyncModbusTcpClient:
