@@ -131,6 +131,8 @@ class SensorModel:
         self._a_e0 = p.area_m2 * p.e0_pa
         self._a_e0_slope = p.area_m2 * p.e0_slope_pa_per_n
         self._hyst = p.hysteresis_strain if on("hysteresis") else np.zeros_like(k)
+        self._force_ends = np.stack([p.force_min_n, p.force_max_n])
+        self._log_force_ends = np.log(self._force_ends)
 
     # ----------------------------------------------------------------- structure
     def has(self, effect: str) -> bool:
@@ -458,8 +460,14 @@ class SensorModel:
             fmax = np.broadcast_to(p.force_max_n, shape)
         else:  # one sample per channel: the polling path, kept free of broadcasting copies
             fmin, fmax = p.force_min_n, p.force_max_n
-        r0t = np.asarray(temp_factor) * p.r0_ohm
-        ends = self._total_ohm(np.stack([fmin, fmax]), strain, r0t)
+        r0t: FloatArray = (
+            p.r0_ohm
+            if isinstance(temp_factor, float) and temp_factor == 1.0
+            else np.asarray(temp_factor, dtype=np.float64) * p.r0_ohm
+        )
+        ends = self._total_ohm(
+            self._force_ends if fmin is p.force_min_n else np.stack([fmin, fmax]), strain, r0t
+        )
         r_at_min, r_at_max = ends[0], ends[1]
         with np.errstate(invalid="ignore"):
             open_contact = np.isposinf(r_meas) & self._open_at_rest
@@ -473,7 +481,10 @@ class SensorModel:
         force = np.where(invalid, np.nan, np.where(saturated, fmax, 0.0))
         if solve.any():
             target = np.log(np.where(solve, r_meas, r_at_min))
-            lo, hi = np.log(fmin) + np.zeros(shape), np.log(fmax) + np.zeros(shape)
+            if fmin is p.force_min_n:
+                lo, hi = self._log_force_ends[0].copy(), self._log_force_ends[1].copy()
+            else:
+                lo, hi = np.log(fmin) + np.zeros(shape), np.log(fmax) + np.zeros(shape)
             if guess_n is None:
                 # straight line between the range ends in (ln F, ln R)
                 lr_min, lr_max = np.log(r_at_min), np.log(np.where(r_at_max > 0, r_at_max, 1e-300))
@@ -482,7 +493,8 @@ class SensorModel:
             else:
                 g = np.asarray(guess_n, dtype=np.float64)
                 u = np.log(np.clip(np.where(np.isfinite(g), g, fmin), fmin, fmax)) + np.zeros(shape)
-            u = self._newton(u, lo, hi, target, strain, r0t)
+            if guess_n is None or not self._newton_fast(u, lo, hi, target, strain, r0t):
+                u = self._newton(u, lo, hi, target, strain, r0t)
             force = np.where(solve, np.exp(u), force)
         return Inversion(np.asarray(force, dtype=np.float64), status)
 
@@ -494,6 +506,42 @@ class SensorModel:
         if self._has_leak:
             return np.asarray(core * self._leak / (core + self._leak))
         return np.asarray(core)
+
+    def _newton_fast(
+        self,
+        u: FloatArray,
+        lo: FloatArray,
+        hi: FloatArray,
+        target: FloatArray,
+        state_strain: FloatArray,
+        r0: FloatArray,
+        max_iter: int = 4,
+    ) -> bool:
+        """Plain Newton (clipped to the range) from a close guess, in place; True if converged.
+
+        Tracking starts from the previous sample's force, where a few plain steps suffice;
+        the bracketing of ``_newton`` costs twice the array operations per step.
+        """
+        neg_gs0, gs0 = -self._gamma_s0, self._gamma_s0
+        a_e0, a_e0s = self._a_e0, self._a_e0_slope
+        k, rs, leak = self._contact_k, self._series, self._leak
+        for _ in range(max_iter):
+            f = np.exp(u)
+            den = a_e0 + a_e0s * f
+            eps = f / den + state_strain
+            one_m = 1.0 - eps
+            ex = r0 * np.exp(neg_gs0 * eps)
+            rc = k / np.sqrt(f)
+            core = ex * one_m + rc + rs
+            dcore = ex * (-1.0 - gs0 * one_m) * a_e0 / (den * den) - 0.5 * rc / f
+            if self._has_leak:
+                share = leak / (core + leak)
+                core, dcore = core * share, dcore * share * share
+            step = (np.log(core) - target) * core / (f * dcore)
+            np.clip(u - step, lo, hi, out=u)
+            if float(np.max(np.abs(step))) < _NEWTON_STOP_STEP:
+                return True
+        return False
 
     def _newton(
         self,
