@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Literal, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from .config import DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS
 from .decode import decode_bitmap, decode_float32, decode_uint16, decode_uint64
 from .errors import DecodeError
 from .model import DividerStatus, ForceStatus, ModelState, SensorModel
@@ -52,9 +53,6 @@ BoolArray = NDArray[np.bool_]
 StatusArray = NDArray[np.int8]
 RegisterKind = Literal["input", "holding"]
 
-#: Input registers 2-5 of the register map: the device clock in ms (uint64).
-DEVICE_TIME_ADDRESS = 2
-DEVICE_TIME_REGISTERS = 4
 #: The three status bitmaps (open, short, saturated) are 16 registers apart.
 BITMAP_STRIDE = 16
 

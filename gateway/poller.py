@@ -37,7 +37,14 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
-from .config import BusConfig, DeviceConfig, GatewayConfig, ReadRequest, read_plan
+from .config import (
+    MERGE_GAP,
+    BusConfig,
+    DeviceConfig,
+    GatewayConfig,
+    ReadRequest,
+    device_plan,
+)
 from .errors import (
     DecodeError,
     DeviceConnectionError,
@@ -46,8 +53,6 @@ from .errors import (
     DeviceTimeoutError,
 )
 from .pipeline import (
-    DEVICE_TIME_ADDRESS,
-    DEVICE_TIME_REGISTERS,
     DeviceCounters,
     DeviceProcessor,
     DeviceSnapshot,
@@ -62,45 +67,8 @@ from .transport import ModbusTransport
 
 log = logging.getLogger(__name__)
 
-#: Reads merge across gaps of at most this many registers. The three status bitmaps are 16
-#: registers apart and every register between them exists (docs/register-map.md), so the
-#: bitmaps of any channel count come in one request. Registers in a wider gap may not exist
-#: (a device answers exception 2), so nothing wider is merged; a device that refuses a
-#: merged read anyway falls back to unmerged reads.
-MERGE_GAP = 15
-
 #: Modbus exception 6 (server device busy) is worth a retry; other exceptions are not.
 RETRYABLE_EXCEPTION_CODES = frozenset({6})
-
-
-def plan_with_device_time(plan: tuple[ReadRequest, ...], max_read_registers: int) -> tuple[ReadRequest, ...]:
-    """Add the device clock (input registers 2-5, uint64 ms) to a read plan.
-
-    The clock makes the creep time steps right whatever the poll timing (and with a
-    simulator running faster than real time). It joins an input read that touches it,
-    else it is one more request (registers 7-15 do not exist, so it cannot ride on the
-    status read). A device without the clock answers exception 2 and the poller falls
-    back to the plan without it (host clock).
-    """
-    lo, hi = DEVICE_TIME_ADDRESS, DEVICE_TIME_ADDRESS + DEVICE_TIME_REGISTERS - 1
-    inputs = [r for r in plan if r.kind == "input"]
-    if any(r.address <= lo and r.end >= hi for r in inputs):
-        return plan
-    for r in inputs:
-        start, end = min(r.address, lo), max(r.end, hi)
-        if r.address <= hi + 1 and r.end >= lo - 1 and end - start + 1 <= max_read_registers:
-            merged = ReadRequest("input", start, end - start + 1, ("device_time", *r.purpose))
-            return tuple(merged if q is r else q for q in plan)
-    return (ReadRequest("input", lo, DEVICE_TIME_REGISTERS, ("device_time",)), *plan)
-
-
-def device_plan(
-    device: DeviceConfig, max_read_registers: int, merge_gap: int, clock: bool
-) -> tuple[ReadRequest, ...]:
-    """The reads of one poll: the configuration's ``read_plan`` (coalesced across gaps of
-    ``merge_gap`` registers) plus the device clock when ``clock``."""
-    plan = tuple(read_plan(device, max_read_registers, max_gap=merge_gap))
-    return plan_with_device_time(plan, max_read_registers) if clock else plan
 
 
 def error_reason(exc: BaseException) -> str:

@@ -23,12 +23,13 @@ from tomlkit.items import AoT, Array, InlineTable, Item, Table
 
 from ..atomic import atomic_write_text
 from ..config import (
+    MERGE_GAP,
     BusConfig,
     ChannelConfig,
     DeviceConfig,
     GatewayConfig,
+    device_plan,
     parse_config,
-    read_plan,
 )
 from ..errors import ConfigError
 from ..model import UnknownEffectError, parameter_names, parse_effects
@@ -131,7 +132,7 @@ def check_config(config_path: Path) -> None:
     for bus in config.buses:
         click.echo(_bus_line(bus))
         for dev in bus.devices:
-            plan = read_plan(dev, bus.max_read_registers)
+            plan = device_plan(dev, bus.max_read_registers, MERGE_GAP, clock=True)
             registers = sum(r.count for r in plan)
             enabled = len(dev.enabled_channels)
             click.echo(

@@ -82,10 +82,13 @@ def test_check_config_prints_the_read_plan(config_file: Path) -> None:
     out = result.stdout
     assert f"{config_file}: OK (1 bus, 2 devices, 20 channels)" in out
     assert "bus bench: tcp 127.0.0.1:5020" in out
-    assert "device array1 (id 1, adc, 16 channels, 16 enabled): 4 requests, 19 registers per poll" in out
+    # what the poller reads: the device clock, the three status bitmaps in one read (every
+    # register between them exists), and the channel block
+    assert "device array1 (id 1, adc, 16 channels, 16 enabled): 3 requests, 53 registers per poll" in out
+    assert "    input 2..5 (4 registers): device_time" in out
+    assert "    input 16..48 (33 registers): status" in out
     assert "    input 100..115 (16 registers): adc" in out
-    assert "    input 48..48 (1 register): status" in out
-    assert "device array2 (id 2, float32, 4 channels, 4 enabled): 4 requests, 11 registers per poll" in out
+    assert "device array2 (id 2, float32, 4 channels, 4 enabled): 3 requests, 45 registers per poll" in out
     assert "    input 400..407 (8 registers): float" in out
 
 

@@ -401,7 +401,8 @@ def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
 
     from gateway.cli.run_cmd import bus_config_for
     from gateway.config import ReadRequest
-    from gateway.poller import BusWorker, device_plan, plan_with_device_time
+    from gateway.config import device_plan, plan_with_device_time
+    from gateway.poller import BusWorker
 
     dev = make_device(n=16, columns=4)
     plan = device_plan(dev, 125, 15, clock=True)
