@@ -400,8 +400,7 @@ def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
     import random
 
     from gateway.cli.run_cmd import bus_config_for
-    from gateway.config import ReadRequest
-    from gateway.config import device_plan, plan_with_device_time
+    from gateway.config import ReadRequest, device_plan, plan_with_device_time
     from gateway.poller import BusWorker
 
     dev = make_device(n=16, columns=4)
