@@ -26,7 +26,7 @@ from typing import Any, Final
 from .errors import ConfigError
 from .model.divider import Divider
 from .model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
-from .model.params import PARAMETER_RANGES, ParameterError, SensorParams, parameter_names
+from .model.params import PARAMETER_RANGES, Interval, ParameterError, SensorParams, parameter_names
 
 __all__ = [
     "BUS_KINDS",
@@ -389,26 +389,6 @@ class _Required:
 _REQUIRED: Final = _Required()
 
 
-@dataclass(frozen=True)
-class _Interval:
-    low: float
-    high: float
-    low_inclusive: bool = True
-    high_inclusive: bool = True
-
-    def contains(self, value: float) -> bool:
-        if math.isnan(value):
-            return False
-        above = value >= self.low if self.low_inclusive else value > self.low
-        below = value <= self.high if self.high_inclusive else value < self.high
-        return above and below
-
-    def describe(self) -> str:
-        left = "[" if self.low_inclusive else "("
-        right = "]" if self.high_inclusive else ")"
-        return f"{left}{self.low:g}, {self.high:g}{right}"
-
-
 def _type_name(value: object) -> str:
     if isinstance(value, bool):
         return "boolean"
@@ -520,7 +500,7 @@ class _Table:
             raise self.error(key, f"{value} is out of range; allowed: 0..{high}, or -1 to disable")
         return value
 
-    def number(self, key: str, default: float | _Required, interval: _Interval, unit: str = "") -> float:
+    def number(self, key: str, default: float | _Required, interval: Interval, unit: str = "") -> float:
         expected = f"a number in {interval.describe()}{unit}"
         value = self._get(key, default, expected)
         if isinstance(value, bool) or not isinstance(value, int | float):
@@ -661,12 +641,12 @@ _MODEL_KEYS: Final = ("effects", "params")
 _CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params")
 _CALIBRATION_CHANNEL_TABLE: Final = "channel"
 
-_POSITIVE: Final = _Interval(0.0, math.inf, low_inclusive=False, high_inclusive=False)
-_TIMEOUT: Final = _Interval(0.0, 60.0, low_inclusive=False)
-_POLL: Final = _Interval(0.001, 3600.0)
-_BACKOFF_INITIAL: Final = _Interval(0.0, 60.0, low_inclusive=False)
-_POSITION: Final = _Interval(-MAX_POSITION_MM, MAX_POSITION_MM)
-_PITCH: Final = _Interval(0.0, MAX_PITCH_MM, low_inclusive=False)
+_POSITIVE: Final = Interval(0.0, math.inf, low_inclusive=False, high_inclusive=False)
+_TIMEOUT: Final = Interval(0.0, 60.0, low_inclusive=False)
+_POLL: Final = Interval(0.001, 3600.0, low_inclusive=True)
+_BACKOFF_INITIAL: Final = Interval(0.0, 60.0, low_inclusive=False)
+_POSITION: Final = Interval(-MAX_POSITION_MM, MAX_POSITION_MM, low_inclusive=True)
+_PITCH: Final = Interval(0.0, MAX_PITCH_MM, low_inclusive=False)
 _ADDRESS_MAX: Final = 65535
 
 
@@ -833,7 +813,7 @@ def _parse_bus(ctx: _Context, path: str, data: dict[str, Any]) -> BusConfig:
     backoff_max_s = table.number(
         "backoff_max_s",
         max(30.0, backoff_initial_s),
-        _Interval(backoff_initial_s, 3600.0),
+        Interval(backoff_initial_s, 3600.0, low_inclusive=True),
         " s (>= backoff_initial_s)",
     )
 

@@ -24,7 +24,9 @@ class ParameterError(ValueError):
 
 
 @dataclass(frozen=True)
-class _Range:
+class Interval:
+    """An allowed range of a number, with the notation used in error messages."""
+
     low: float
     high: float
     low_inclusive: bool = False
@@ -43,15 +45,15 @@ class _Range:
         return f"{left}{self.low:g}, {self.high:g}{right}"
 
 
-_POSITIVE = _Range(0.0, math.inf, high_inclusive=False)
-_NON_NEGATIVE = _Range(0.0, math.inf, low_inclusive=True, high_inclusive=False)
+_POSITIVE = Interval(0.0, math.inf, high_inclusive=False)
+_NON_NEGATIVE = Interval(0.0, math.inf, low_inclusive=True, high_inclusive=False)
 
 #: Allowed range of every parameter, used by validation and by error messages.
-PARAMETER_RANGES: dict[str, _Range] = {
-    "barrier_height_ev": _Range(0.0, 10.0),
-    "particle_diameter_m": _Range(0.0, 1e-3),
-    "volume_fraction": _Range(0.0, math.pi / 6, high_inclusive=False),
-    "area_m2": _Range(0.0, 1.0),
+PARAMETER_RANGES: dict[str, Interval] = {
+    "barrier_height_ev": Interval(0.0, 10.0),
+    "particle_diameter_m": Interval(0.0, 1e-3),
+    "volume_fraction": Interval(0.0, math.pi / 6, high_inclusive=False),
+    "area_m2": Interval(0.0, 1.0),
     "r0_ohm": _POSITIVE,
     "rho1_ohm_m": _NON_NEGATIVE,
     "rho2_ohm_m": _NON_NEGATIVE,
@@ -64,12 +66,12 @@ PARAMETER_RANGES: dict[str, _Range] = {
     "mu1_slope_pa_s_per_n": _NON_NEGATIVE,
     "e2_pa": _POSITIVE,
     "mu2_pa_s": _POSITIVE,
-    "hysteresis_strain": _Range(0.0, 0.1, low_inclusive=True),
+    "hysteresis_strain": Interval(0.0, 0.1, low_inclusive=True),
     "hysteresis_force_n": _POSITIVE,
-    "temperature_coeff_per_k": _Range(-0.2, 0.2, low_inclusive=True),
-    "reference_temperature_c": _Range(-273.15, 1000.0),
+    "temperature_coeff_per_k": Interval(-0.2, 0.2, low_inclusive=True),
+    "reference_temperature_c": Interval(-273.15, 1000.0),
     "series_resistance_ohm": _NON_NEGATIVE,
-    "leakage_resistance_ohm": _Range(0.0, math.inf, high_inclusive=True),
+    "leakage_resistance_ohm": Interval(0.0, math.inf, high_inclusive=True),
     "force_min_n": _POSITIVE,
     "force_max_n": _POSITIVE,
 }

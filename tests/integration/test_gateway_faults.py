@@ -163,7 +163,8 @@ async def test_device_switched_off_and_on(rig: Rig) -> None:
     assert rate >= 0.6 / POLL_S, f"device b polled at {rate:.1f}/s while a was off"
     # reconnects are spaced by the jittered back-off (0.1 s doubling to 0.5 s): no busy loop
     attempts = worker.connect_failures - failures0
-    assert 1 <= attempts <= elapsed / 0.01 / 2, attempts
+    assert attempts >= 1, attempts
+    assert attempts <= elapsed / 0.01 / 2, attempts
     await rig.power_on()
     await wait_for(lambda: rig.metric("tactile_device_up", device="a") == 1.0, 5, "a back up after power on")
     assert rig.status() in ("ok", "no_contact")
