@@ -138,7 +138,7 @@ def test_check_config_toml_syntax_error_names_the_line(config_file: Path) -> Non
 
 
 def test_check_config_on_the_shipped_example() -> None:
-    example = Path(__file__).resolve().parents[3] / "examples" / "gateway.toml"
+    example = Path(__file__).resolve().parents[4] / "examples" / "gateway.toml"
     result = run("check-config", "-c", str(example))
     assert result.exit_code == 0, result.output
     assert "15 enabled" in result.stdout

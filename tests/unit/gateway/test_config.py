@@ -27,7 +27,7 @@ from gateway.config import (
 from gateway.errors import ConfigError
 from gateway.model import PAPER_EFFECTS, Divider, SensorParams
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SOURCE = Path("/cfg/gateway.toml")
 
 BASE = """\
