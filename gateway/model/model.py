@@ -507,6 +507,28 @@ class SensorModel:
             return np.asarray(core * self._leak / (core + self._leak))
         return np.asarray(core)
 
+    def _log_gap_and_slope(
+        self, u: FloatArray, target: FloatArray, state_strain: FloatArray, r0: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """g = ln R(F) - target and dg/du at F = e^u (the Newton step of both solvers).
+
+        dR_pol/dF = R0 e^(-gamma s0 eps) (-1 - gamma s0 (1 - eps)) deps/dF with
+        deps/dF = A E0(0) / (A E0(F))^2; d(k / sqrt F)/dF = -k / (2 F^1.5); a parallel
+        leakage path scales the derivative by (R_leak / (R_core + R_leak))^2.
+        """
+        f = np.exp(u)
+        den = self._a_e0 + self._a_e0_slope * f
+        eps = f / den + state_strain
+        one_m = 1.0 - eps
+        ex = r0 * np.exp(-self._gamma_s0 * eps)
+        rc = self._contact_k / np.sqrt(f)
+        core = ex * one_m + rc + self._series
+        dcore = ex * (-1.0 - self._gamma_s0 * one_m) * self._a_e0 / (den * den) - 0.5 * rc / f
+        if self._has_leak:
+            share = self._leak / (core + self._leak)
+            core, dcore = core * share, dcore * share * share
+        return np.log(core) - target, f * dcore / core
+
     def _newton_fast(
         self,
         u: FloatArray,
@@ -522,22 +544,9 @@ class SensorModel:
         Tracking starts from the previous sample's force, where a few plain steps suffice;
         the bracketing of ``_newton`` costs twice the array operations per step.
         """
-        neg_gs0, gs0 = -self._gamma_s0, self._gamma_s0
-        a_e0, a_e0s = self._a_e0, self._a_e0_slope
-        k, rs, leak = self._contact_k, self._series, self._leak
         for _ in range(max_iter):
-            f = np.exp(u)
-            den = a_e0 + a_e0s * f
-            eps = f / den + state_strain
-            one_m = 1.0 - eps
-            ex = r0 * np.exp(neg_gs0 * eps)
-            rc = k / np.sqrt(f)
-            core = ex * one_m + rc + rs
-            dcore = ex * (-1.0 - gs0 * one_m) * a_e0 / (den * den) - 0.5 * rc / f
-            if self._has_leak:
-                share = leak / (core + leak)
-                core, dcore = core * share, dcore * share * share
-            step = (np.log(core) - target) * core / (f * dcore)
+            g, slope = self._log_gap_and_slope(u, target, state_strain, r0)
+            step = g / slope
             np.clip(u - step, lo, hi, out=u)
             if float(np.max(np.abs(step))) < _NEWTON_STOP_STEP:
                 return True
@@ -553,24 +562,8 @@ class SensorModel:
         r0: FloatArray,
     ) -> FloatArray:
         """Safeguarded Newton on ln R(e^u) = target, with a bisection bracket [lo, hi]."""
-        gs0 = self._gamma_s0
-        a_e0, a_e0s = self._a_e0, self._a_e0_slope
-        k, rs, leak = self._contact_k, self._series, self._leak
         for _ in range(_NEWTON_MAX_ITER):
-            f = np.exp(u)
-            den = a_e0 + a_e0s * f
-            eps = f / den + state_strain
-            ex = r0 * np.exp(-gs0 * eps)
-            rc = k / np.sqrt(f)
-            core = ex * (1.0 - eps) + rc + rs
-            dcore = ex * (-1.0 - gs0 * (1.0 - eps)) * a_e0 / (den * den) - 0.5 * rc / f
-            if self._has_leak:
-                share = leak / (core + leak)
-                total, dtotal = core * share, dcore * share * share
-            else:
-                total, dtotal = core, dcore
-            g = np.log(total) - target
-            slope = f * dtotal / total
+            g, slope = self._log_gap_and_slope(u, target, state_strain, r0)
             np.copyto(lo, u, where=g > 0.0)
             np.copyto(hi, u, where=g <= 0.0)
             step = g / slope
