@@ -317,23 +317,22 @@ class ModbusTransport:
 
     async def read_input_registers(self, device_id: int, address: int, count: int) -> list[int]:
         """Function 4: ``count`` input registers from ``address`` (values 0..65535)."""
-        self._check_range(address, count, MAX_READ_COUNT)
-        what = f"read input {address}+{count} of device {device_id} on {self.name!r}"
-        response = await self._execute(
-            what,
-            device_id,
-            lambda c: c.read_input_registers(address, count=count, device_id=device_id),
-        )
-        return self._check_read(what, response, FC_READ_INPUT, count)
+        return await self._read_registers("input", device_id, address, count)
 
     async def read_holding_registers(self, device_id: int, address: int, count: int) -> list[int]:
         """Function 3: ``count`` holding registers from ``address``."""
+        return await self._read_registers("holding", device_id, address, count)
+
+    async def _read_registers(self, kind: str, device_id: int, address: int, count: int) -> list[int]:
         self._check_range(address, count, MAX_READ_COUNT)
-        what = f"read holding {address}+{count} of device {device_id} on {self.name!r}"
+        what = f"read {kind} {address}+{count} of device {device_id} on {self.name!r}"
+        if kind == "input":
+            response = await self._execute(
+                what, device_id, lambda c: c.read_input_registers(address, count=count, device_id=device_id)
+            )
+            return self._check_read(what, response, FC_READ_INPUT, count)
         response = await self._execute(
-            what,
-            device_id,
-            lambda c: c.read_holding_registers(address, count=count, device_id=device_id),
+            what, device_id, lambda c: c.read_holding_registers(address, count=count, device_id=device_id)
         )
         return self._check_read(what, response, FC_READ_HOLDING, count)
 

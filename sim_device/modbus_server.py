@@ -373,6 +373,17 @@ async def _start(server: Any, what: str) -> None:
 
 
 @contextlib.asynccontextmanager
+async def _running(sim: SimServer, tick_s: float | None) -> AsyncIterator[SimServer]:
+    """Run a started server's physics ticker (if any) until the block ends, then stop it."""
+    if tick_s is not None:
+        sim.start_ticker(tick_s)
+    try:
+        yield sim
+    finally:
+        await sim.stop()
+
+
+@contextlib.asynccontextmanager
 async def serve_tcp(
     arrays: SimArray | Sequence[SimArray],
     host: str = "127.0.0.1",
@@ -389,13 +400,9 @@ async def serve_tcp(
     _configure(server, items, framer == "rtu", False, None)
     await _start(server, f"{host}:{port}")
     bound = server.transport.sockets[0].getsockname()[1]  # type: ignore[attr-defined]
-    sim = SimServer(server, items, "rtu-tcp" if framer == "rtu" else "tcp", host, int(bound), "")
-    if tick_s is not None:
-        sim.start_ticker(tick_s)
-    try:
+    kind = "rtu-tcp" if framer == "rtu" else "tcp"
+    async with _running(SimServer(server, items, kind, host, int(bound), ""), tick_s) as sim:
         yield sim
-    finally:
-        await sim.stop()
 
 
 @contextlib.asynccontextmanager
@@ -420,13 +427,8 @@ async def serve_tls(
     _configure(server, items, False, False, None)
     await _start(server, f"{host}:{port} (TLS)")
     bound = server.transport.sockets[0].getsockname()[1]  # type: ignore[attr-defined]
-    sim = SimServer(server, items, "tls", host, int(bound), "")
-    if tick_s is not None:
-        sim.start_ticker(tick_s)
-    try:
+    async with _running(SimServer(server, items, "tls", host, int(bound), ""), tick_s) as sim:
         yield sim
-    finally:
-        await sim.stop()
 
 
 def _check_serial_device(port: str) -> None:
@@ -466,13 +468,8 @@ async def serve_serial(
     )
     _configure(server, items, True, True, LineTiming(baudrate, turnaround_s) if line_timing else None)
     await _start(server, f"serial device {port}")
-    sim = SimServer(server, items, "serial", "", 0, port)
-    if tick_s is not None:
-        sim.start_ticker(tick_s)
-    try:
+    async with _running(SimServer(server, items, "serial", "", 0, port), tick_s) as sim:
         yield sim
-    finally:
-        await sim.stop()
 
 
 @contextlib.asynccontextmanager

@@ -295,7 +295,10 @@ async def test_reload_keeps_the_creep_state_of_unchanged_channels() -> None:
             snap = poller.snapshot()
     assert report.channels_kept == 3 and report.channels_reset == 1
     assert np.all(before > 1e-5)
-    np.testing.assert_array_equal(after[[0, 2, 3]], before[[0, 2, 3]])
+    # kept, not reset: a poll that completes while the reload waits for the conversion in
+    # flight may advance the state by one step, so "kept" is "within 1 % of before"
+    assert np.all(after[[0, 2, 3]] > 1e-5)
+    np.testing.assert_allclose(after[[0, 2, 3]], before[[0, 2, 3]], rtol=1e-2)
     assert after[1] == 0.0
     assert snap.devices["arr"].up
     assert snap.counters["arr"].reads_total > 0
