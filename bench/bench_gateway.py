@@ -45,7 +45,7 @@ GAP_CHARS = 3.5
 
 
 def _array(channels: int = CHANNELS, columns: int = COLUMNS) -> SimArray:
-    cfg = ArrayConfig(channels=channels, columns=columns, pitch_mm=2.5, seed=1, scenario="holds", speed=1.0)
+    cfg = ArrayConfig(channels=channels, columns=columns, pitch_mm=2.5, seed=1, scenario="sine", speed=1.0)
     return SimArray(cfg, device_id=1)
 
 
@@ -103,7 +103,7 @@ from sim_device import ArrayConfig, SimArray, serve_tcp
 
 async def main():
     cfg = ArrayConfig(channels=int(sys.argv[1]), columns=int(sys.argv[2]), pitch_mm=2.5, seed=1,
-                      scenario="holds", speed=1.0)
+                      scenario="sine", speed=1.0)
     async with serve_tcp([SimArray(cfg, device_id=1)], host="127.0.0.1", port=0) as sim:
         print(sim.port, flush=True)
         await asyncio.get_running_loop().run_in_executor(None, sys.stdin.read)
@@ -228,7 +228,7 @@ from sim_device import ArrayConfig, SimArray, serve_serial
 
 async def main():
     cfg = ArrayConfig(channels=int(sys.argv[1]), columns=int(sys.argv[2]), pitch_mm=2.5, seed=1,
-                      scenario="holds", speed=1.0)
+                      scenario="sine", speed=1.0)
     async with serve_serial([SimArray(cfg, device_id=1)], port=sys.argv[3], baudrate=int(sys.argv[4]),
                             line_timing=True):
         print("ready", flush=True)

@@ -68,9 +68,10 @@ def _words(registers: ArrayLike, byte_order: Order) -> U16Array:
     return regs
 
 
-def decode_uint16(registers: ArrayLike, byte_order: Order = "big") -> NDArray[np.int64]:
-    """One unsigned 16-bit value per register (ADC counts), as int64 for safe arithmetic."""
-    return _words(registers, byte_order).astype(np.int64)
+def decode_uint16(registers: ArrayLike, byte_order: Order = "big") -> NDArray[np.uint16]:
+    """One unsigned 16-bit value per register (ADC counts), as uint16 (0..65535 by type;
+    widen before arithmetic)."""
+    return _words(registers, byte_order)
 
 
 def _combine(registers: ArrayLike, n_words: int, word_order: Order, byte_order: Order) -> NDArray[np.uint64]:
@@ -136,9 +137,25 @@ def decode_bitmap(registers: ArrayLike, n_bits: int, byte_order: Order = "big") 
     needed = -(-n_bits // BITS_PER_REGISTER)
     if words.size < needed:
         raise DecodeError(f"{n_bits} status bits need {needed} registers, got {words.size}")
-    idx = np.arange(n_bits)
-    word = words[idx // BITS_PER_REGISTER].astype(np.uint32)
-    return ((word >> (idx % BITS_PER_REGISTER).astype(np.uint32)) & 1).astype(bool)
+    # little-endian bytes, least significant bit first: bit i lands at position i
+    octets = words[:needed].astype("<u2", copy=False).view(np.uint8)
+    bits: BoolArray = np.unpackbits(octets, count=n_bits, bitorder="little").view(np.bool_)
+    return bits
+
+
+def register_value(registers: Sequence[int], word_order: Order = "big", byte_order: Order = "big") -> int:
+    """One unsigned value from a few registers (a 32/64-bit counter), as a Python int."""
+    _check_order("word_order", word_order)
+    _check_order("byte_order", byte_order)
+    value = 0
+    for w in registers if word_order == "big" else reversed(registers):
+        w = int(w)
+        if not 0 <= w <= 0xFFFF:
+            raise DecodeError("register value outside [0, 65535]")
+        if byte_order == "little":
+            w = ((w & 0xFF) << 8) | (w >> 8)
+        value = (value << 16) | w
+    return value
 
 
 def encode_bitmap(bits: Sequence[bool] | BoolArray, n_registers: int | None = None) -> list[int]:

@@ -34,15 +34,15 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .config import DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS
-from .decode import decode_bitmap, decode_float32, decode_uint16, decode_uint64
+from .decode import decode_bitmap, decode_float32, decode_uint16, register_value
 from .errors import DecodeError
-from .model import DividerStatus, ForceStatus, ModelState, SensorModel
+from .model import Divider, DividerStatus, ForceStatus, ModelState, SensorModel
 
 if TYPE_CHECKING:
     from .config import ChannelConfig, DeviceConfig
@@ -87,6 +87,12 @@ def _read_only(a: NDArray[_G]) -> NDArray[_G]:
     return a
 
 
+def _frozen(a: NDArray[_G]) -> NDArray[_G]:
+    out: NDArray[_G] = np.array(a, copy=True)
+    out.setflags(write=False)
+    return out
+
+
 # plain ints: numpy compares these without probing an enum member's attributes (hot path)
 _CHANNEL_ERROR = int(ChannelStatus.ERROR)
 _CHANNEL_NO_CONTACT = int(ChannelStatus.NO_CONTACT)
@@ -104,10 +110,85 @@ _FORCE_OK = int(ForceStatus.OK)
 _FORCE_SATURATED = int(ForceStatus.SATURATED)
 
 
-def _frozen(a: NDArray[_G]) -> NDArray[_G]:
-    out: NDArray[_G] = np.array(a, copy=True)
-    out.setflags(write=False)
-    return out
+def _final_status_table() -> NDArray[np.int8]:
+    """Channel status by 8 * base status + 2 * model status + device saturated bit.
+
+    A base status other than OK (open, short, error from the registers) stands; on a usable
+    channel the model's verdict decides, and the device's saturated bit only turns a force
+    inside the range into saturated (at the bottom rail the model already reads no contact).
+    """
+    table = np.empty(8 * len(ChannelStatus), dtype=np.int8)
+    by_model = {
+        _FORCE_OK: _CHANNEL_OK,
+        _FORCE_NO_CONTACT: _CHANNEL_NO_CONTACT,
+        _FORCE_SATURATED: _CHANNEL_SATURATED,
+        _FORCE_INVALID: _CHANNEL_ERROR,
+    }
+    for base in ChannelStatus:
+        for model_status, channel_status in by_model.items():
+            for device_saturated in (0, 1):
+                value = int(base)
+                if base == ChannelStatus.OK:
+                    value = channel_status
+                    if device_saturated and model_status == _FORCE_OK:
+                        value = _CHANNEL_SATURATED
+                table[8 * int(base) + 2 * model_status + device_saturated] = value
+    table.setflags(write=False)
+    return table
+
+
+_FINAL_STATUS = _final_status_table()
+#: Statuses whose channel carries a force (N) / counts as in contact.
+_STATUS_CODES = np.arange(len(ChannelStatus))
+_VALUED = _frozen(np.isin(_STATUS_CODES, [_CHANNEL_OK, _CHANNEL_NO_CONTACT, _CHANNEL_SATURATED]))
+_IN_CONTACT = _frozen(np.isin(_STATUS_CODES, [_CHANNEL_OK, _CHANNEL_SATURATED]))
+
+
+def _base_status(divider_status: int, open_bit: int, short_bit: int) -> int:
+    if open_bit:
+        return _CHANNEL_OPEN
+    if short_bit:
+        return _CHANNEL_SHORT
+    return _CHANNEL_ERROR if divider_status == _DIVIDER_INVALID else _CHANNEL_OK
+
+
+#: Base status of an ADC channel by 4 * divider status + 2 * open bit + short bit (with bitmaps).
+_BASE_FROM_BITMAPS = _frozen(
+    np.array([_base_status(d, o, sh) for d in range(4) for o in (0, 1) for sh in (0, 1)], dtype=np.int8)
+)
+#: What a rail reads as when the device's bitmaps say the channel is not faulty (ohm).
+_BIG_OHM = float(np.finfo(np.float64).max)
+_TINY_OHM = float(np.finfo(np.float64).tiny)
+
+
+@dataclass(frozen=True, eq=False)
+class AdcTables:
+    """Per 16-bit register value: the resistance to report (NaN for none: open or
+    invalid), the resistance the model gets with and without fault bitmaps, and the
+    ``DividerStatus`` (arrays of 65536, read-only)."""
+
+    report_ohm: FloatArray
+    model_ohm: FloatArray
+    model_with_bitmaps_ohm: FloatArray
+    status: NDArray[np.int8]
+
+
+@functools.lru_cache(maxsize=16)
+def _adc_tables(divider: Divider) -> AdcTables:
+    """Lookup tables of a divider, shared by every device that has it (about 2 MB)."""
+    r, status = divider.resistance(np.arange(0x10000, dtype=np.int64))
+    return AdcTables(
+        report_ohm=_frozen(np.where(r == np.inf, np.nan, r)),
+        model_ohm=_frozen(r),
+        model_with_bitmaps_ohm=_frozen(np.minimum(np.maximum(r, _TINY_OHM), _BIG_OHM)),
+        status=_frozen(status),
+    )
+
+
+#: Base status of an ADC channel by divider status (no bitmaps: the rails are faults).
+_BASE_FROM_DIVIDER = _frozen(
+    np.array([_CHANNEL_OK, _CHANNEL_OPEN, _CHANNEL_SHORT, _CHANNEL_ERROR], dtype=np.int8)
+)
 
 
 # --------------------------------------------------------------------------- registers
@@ -139,7 +220,7 @@ class RegisterImage:
     ) -> RegisterImage:
         blocks = []
         for kind, address, values in reads:
-            arr = np.asarray(values, dtype=np.uint16).copy()
+            arr = np.array(values, dtype=np.uint16)  # always a copy: the image owns it
             arr.setflags(write=False)
             blocks.append(RegisterBlock(kind, int(address), arr))
         return cls(tuple(blocks))
@@ -163,7 +244,7 @@ class RegisterImage:
 class RawSample:
     """One poll's measurements of all N device channels, decoded but not yet converted."""
 
-    counts: IntArray | None = None  # ADC counts (encoding "adc")
+    counts: NDArray[np.integer[Any]] | None = None  # ADC counts (encoding "adc"), uint16 from registers
     resistance_ohm: FloatArray | None = None  # ohm (encoding "float32")
     open_bits: BoolArray | None = None
     short_bits: BoolArray | None = None
@@ -205,7 +286,7 @@ def decode_sample(device: DeviceConfig, image: RegisterImage) -> RawSample:
     device_time = None
     words = image.get("input", DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS)
     if words is not None:
-        device_time = float(decode_uint64(words, wo, bo)[0]) / 1000.0
+        device_time = register_value(words.tolist(), wo, bo) / 1000.0
     return RawSample(
         counts, resistance, bitmaps[0], bitmaps[1], bitmaps[2], temperature, reference, device_time
     )
@@ -339,16 +420,14 @@ def array_quantities(
     (not NaN) when nothing is in contact. Contact area = channels in contact x pitch^2.
     """
     f = np.asarray(force_n, dtype=np.float64)
-    st = np.asarray(status)
-    with np.errstate(invalid="ignore"):
-        contact = ((st == _CHANNEL_OK) | (st == _CHANNEL_SATURATED)) & np.isfinite(f) & (f > 0.0)
+    contact = _IN_CONTACT[np.asarray(status)] & (f > 0.0)  # NaN is never > 0
     n = int(np.count_nonzero(contact))
     if n == 0:
         return ArrayQuantities(0.0, None, 0, 0.0, None, None)
     fc = np.where(contact, f, 0.0)
     total = float(fc.sum())
-    cop = (float((fc * x_mm).sum() / total), float((fc * y_mm).sum() / total))
-    peak = int(np.argmax(np.where(contact, f, -np.inf)))
+    cop = (float(np.dot(fc, x_mm)) / total, float(np.dot(fc, y_mm)) / total)
+    peak = int(fc.argmax())  # forces in contact are > 0, the rest 0
     return ArrayQuantities(total, cop, n, float(n * pitch_mm * pitch_mm), peak, float(f[peak]))
 
 
@@ -472,6 +551,10 @@ class DeviceProcessor:
         self._single_group = len(self.groups) == 1 and bool(
             np.array_equal(self.groups[0][0], np.arange(len(chans)))
         )
+        # the enabled channels as a slice when they are all of them, in order (no copy)
+        every = np.array_equal(self.index, np.arange(device.n_channels))
+        self._pick: slice | NDArray[np.int64] = slice(None) if every else self.index
+        self._no_values = _frozen(np.full(len(chans), np.nan))
 
     @property
     def name(self) -> str:
@@ -509,41 +592,57 @@ class DeviceProcessor:
 
     # ------------------------------------------------------------------ one poll
     def _resistance(self, raw: RawSample) -> tuple[FloatArray, FloatArray, StatusArray]:
-        """Resistance (ohm; NaN invalid, +inf open), the resistance given to the model, and the
-        base status (OK / OPEN / SHORT / ERROR).
+        """Resistance to report (ohm; NaN where there is none: invalid or open), the
+        resistance given to the model, and the base status (OK / OPEN / SHORT / ERROR).
 
         The rails mean open (0 counts, +inf ohm) and short (full scale, 0 ohm) only when the
         device reports no fault bitmaps. With bitmaps the device says which channels are
         faulty, and a rail is a reading: no current at rest (a sensor whose contact is open
         reads no contact, 0 N) or less resistance than the converter resolves (saturated).
         """
-        idx = self.index
-        status = np.full(len(idx), _CHANNEL_OK, dtype=np.int8)
+        idx = self._pick
         if raw.counts is not None:
-            r, dstat = self.device.divider.resistance(raw.counts[idx])
-            rail_open = dstat == _DIVIDER_OPEN
-            rail_short = dstat == _DIVIDER_SHORT
-            status[dstat == _DIVIDER_INVALID] = _CHANNEL_ERROR
-        elif raw.resistance_ohm is not None:
-            r = np.asarray(raw.resistance_ohm[idx], dtype=np.float64)
-            with np.errstate(invalid="ignore"):
-                rail_open = np.isposinf(r)
-                rail_short = r == 0.0
-                status[np.isnan(r) | np.isneginf(r) | (r < 0.0)] = _CHANNEL_ERROR
-        else:
+            counts = raw.counts[idx]
+            if counts.dtype == np.uint16:  # register values: every quantity is a lookup
+                table = _adc_tables(self.device.divider)
+                r_out, dstat = table.report_ohm[counts], table.status[counts]
+            else:
+                r, dstat = self.device.divider.resistance(counts)
+                table = None
+                r_out = np.where(r == np.inf, np.nan, r)  # the open rail has no resistance value
+            if raw.open_bits is None and raw.short_bits is None:
+                r_model = table.model_ohm[counts] if table is not None else r
+                return r_out, r_model, _BASE_FROM_DIVIDER[dstat]
+            code = dstat * np.int8(4)
+            if raw.open_bits is not None:
+                code += raw.open_bits[idx].view(np.int8) * np.int8(2)
+            if raw.short_bits is not None:
+                code += raw.short_bits[idx].view(np.int8)
+            # with bitmaps a rail is a reading: inf -> no current at rest, 0 -> saturated
+            if table is not None:
+                r_model = table.model_with_bitmaps_ohm[counts]
+            else:
+                r_model = np.minimum(np.maximum(r, _TINY_OHM), _BIG_OHM)
+            return r_out, r_model, _BASE_FROM_BITMAPS[code]
+        if raw.resistance_ohm is None:
             raise DecodeError("a sample needs ADC counts or resistances")
-        r = np.asarray(r, dtype=np.float64)
+        status = np.full(len(self.index), _CHANNEL_OK, dtype=np.int8)
+        r = np.asarray(raw.resistance_ohm[idx], dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            rail_open = np.isposinf(r)
+            rail_short = r == 0.0
+            status[np.isnan(r) | np.isneginf(r) | (r < 0.0)] = _CHANNEL_ERROR
+            r_out = np.where(np.isfinite(r) & (r >= 0.0), r, np.nan)
         if raw.open_bits is None and raw.short_bits is None:
             status[rail_open] = _CHANNEL_OPEN
             status[rail_short] = _CHANNEL_SHORT
-            return r, r, status
-        big, tiny = np.finfo(np.float64).max, np.finfo(np.float64).tiny
-        r_model = np.where(rail_open, big, np.where(rail_short, tiny, r))
+            return r_out, r, status
+        r_model = np.where(rail_open, _BIG_OHM, np.where(rail_short, _TINY_OHM, r))
         if raw.open_bits is not None:
             status[raw.open_bits[idx]] = _CHANNEL_OPEN
         if raw.short_bits is not None:
             status[raw.short_bits[idx] & (status != _CHANNEL_OPEN)] = _CHANNEL_SHORT
-        return r, r_model, status
+        return r_out, r_model, status
 
     def _dt(self, state: DeviceState, raw: RawSample, host_time_s: float) -> tuple[float, float, bool]:
         """Seconds since the previous sample: device clock if it has one, else host clock."""
@@ -562,12 +661,13 @@ class DeviceProcessor:
     ) -> tuple[DeviceSnapshot, DeviceState]:
         """Convert one good poll. ``host_time_s`` is a monotonic clock, ``wall_time_s`` Unix time."""
         n = len(self.channels)
-        resistance, r_model, status = self._resistance(raw)
+        r_out, r_model, base = self._resistance(raw)
         dt, now, use_device = self._dt(state, raw, host_time_s)
-        usable = status == _CHANNEL_OK
-        r_model = np.where(usable, r_model, np.nan)
+        usable = base == _CHANNEL_OK
+        if not usable.all():
+            r_model = np.where(usable, r_model, np.nan)
         ms = state.model_state
-        temperature = None if raw.temperature_c is None else raw.temperature_c[self.index]
+        temperature = None if raw.temperature_c is None else raw.temperature_c[self._pick]
         if self._single_group:
             model = self.groups[0][1]
             temp = temperature if model.has("temperature") else None
@@ -587,22 +687,15 @@ class DeviceProcessor:
                 for dst, src in zip(new, state_arrays(gstate), strict=True):
                     dst[idx] = src
             new_state_model = state_from_arrays(new)
-        status = np.where(usable & (model_status == _FORCE_NO_CONTACT), _CHANNEL_NO_CONTACT, status)
-        status = np.where(usable & (model_status == _FORCE_SATURATED), _CHANNEL_SATURATED, status)
-        status = np.where(usable & (model_status == _FORCE_INVALID), _CHANNEL_ERROR, status)
+        code = base * np.int8(8) + model_status * np.int8(2)
         if raw.saturated_bits is not None:
-            # the device flags ADC readings at either rail; only at the top one is the force
-            # beyond the range (at the bottom the model already reads no contact)
-            device_sat = raw.saturated_bits[self.index] & usable & (model_status == _FORCE_OK)
-            status = np.where(device_sat, _CHANNEL_SATURATED, status)
-        status = status.astype(np.int8)
-        valued = (status == _CHANNEL_OK) | (status == _CHANNEL_NO_CONTACT) | (status == _CHANNEL_SATURATED)
-        force = np.where(valued & np.isfinite(force), force, np.nan)
-        with np.errstate(invalid="ignore"):
-            r_out = np.where(np.isfinite(resistance) & (resistance >= 0.0), resistance, np.nan)
-        reference = np.full(n, np.nan)
+            code += raw.saturated_bits[self._pick].view(np.int8)
+        status = _FINAL_STATUS[code]
+        valued = _VALUED[status]
+        force = np.where(valued, force, np.nan)
+        reference = self._no_values
         if raw.reference_force_n is not None:
-            reference = np.asarray(raw.reference_force_n[self.index], dtype=np.float64)
+            reference = _read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
         q = array_quantities(force, status, self.x_mm, self.y_mm, float(self.device.pitch_mm))
         snap = DeviceSnapshot(
             device=self.device.name,
@@ -614,7 +707,7 @@ class DeviceProcessor:
             resistance_ohm=_read_only(r_out),
             force_n=_read_only(force),
             static_estimate=StaticEstimate(self.groups, _read_only(r_model), temperature, _read_only(valued)),
-            reference_force_n=_read_only(reference),
+            reference_force_n=reference,
             status=_read_only(status),
             up=True,
             timestamp_s=wall_time_s,

@@ -24,9 +24,7 @@ from __future__ import annotations
 
 import asyncio
 import bisect
-import concurrent.futures
 import contextlib
-import functools
 import itertools
 import logging
 import math
@@ -82,24 +80,18 @@ def error_reason(exc: BaseException) -> str:
     return "decode"
 
 
-_Converted = tuple[DeviceSnapshot, DeviceState, float]
+@dataclass(frozen=True)
+class PendingConversion:
+    """The registers of a finished poll, waiting to be decoded and converted.
 
-
-def _convert(
-    processor: DeviceProcessor,
-    state: DeviceState,
-    reads: list[tuple[RegisterKind, int, list[int]]],
-    wall_time_s: float,
-    host_time_s: float,
-    t0: float,
-) -> _Converted:
-    """Decode and convert one poll (runs in the converter thread; pure apart from the clock).
-
-    Returns the snapshot, the new state and the poll duration (reads + conversion, s).
+    ``wall_time_s`` (Unix) and ``host_time_s`` (monotonic) are taken when the reads end, so
+    that the conversion's place in time does not depend on when it runs.
     """
-    raw = decode_sample(processor.device, RegisterImage.from_reads(reads))
-    snap, new_state = processor.process(state, raw, wall_time_s, host_time_s)
-    return snap, new_state, time.monotonic() - t0
+
+    reads: list[tuple[RegisterKind, int, list[int]]]
+    wall_time_s: float
+    host_time_s: float
+    reads_duration_s: float
 
 
 class SnapshotHolder:
@@ -192,7 +184,7 @@ class DeviceRunner:
     failures: int = 0
     next_attempt: float = 0.0
     last_error: str | None = None
-    pending: asyncio.Future[_Converted] | None = None  # conversion in flight
+    pending: PendingConversion | None = None  # read but not yet converted
 
     @property
     def counters(self) -> DeviceCounters:
@@ -231,7 +223,6 @@ class BusWorker:
         self._wall = wall_clock
         self._mono = monotonic
         self.task: asyncio.Task[None] | None = None
-        self._executor: concurrent.futures.ThreadPoolExecutor | None = None
         self._stopping = False
         self.connect_failures = 0
 
@@ -278,13 +269,14 @@ class BusWorker:
         raise last
 
     async def poll_device(self, runner: DeviceRunner) -> bool:
-        """Read one device once and hand the registers to its conversion; True if the reads
+        """Read one device once and queue its registers for conversion; True if the reads
         succeeded.
 
-        The conversion (decode + model) runs in this bus's converter thread and its result
-        is published as soon as it is done, while the task goes on with the next reads: CPU
-        work overlaps the waits for the device, and the event loop (other buses) never waits
-        for the model. Conversions of one device are applied in poll order.
+        The conversion (decode + model) of a poll is deferred: it runs right after the
+        next request on this bus has been sent, while the device works on the answer, so
+        the CPU work of one poll overlaps the wait for the next (``settle`` or the end of
+        a poll cycle runs it at once when no request follows). Conversions of one device
+        are applied in poll order, each before anything else is published for it.
 
         Raises ``DeviceConnectionError`` (after publishing a stale snapshot) when the bus
         connection is gone, so that the caller reconnects.
@@ -295,64 +287,73 @@ class BusWorker:
             for req in runner.plan:
                 kind: RegisterKind = "input" if req.kind == "input" else "holding"
                 try:
-                    regs = await self._read(runner, req)
+                    if reads or not self._has_pending():
+                        regs = await self._read(runner, req)
+                    else:
+                        regs = await self._read_overlapping(runner, req)
                 except DeviceExceptionResponse as exc:
                     if exc.exception_code != 2 or not self._fall_back(runner, req):
                         raise
                     return await self.poll_device(runner)
                 reads.append((kind, req.address, regs))
         except DeviceError as exc:  # already counted per request
-            await self.settle(runner)
+            self.settle_now(runner)
             self._fail(runner, exc)
             if isinstance(exc, DeviceConnectionError):
                 raise
             return False
-        await self.settle(runner)
-        loop = asyncio.get_running_loop()
-        job = functools.partial(
-            _convert, runner.processor, runner.state, reads, self._wall(), self._mono(), t0
-        )
-        future = loop.run_in_executor(self._converter(), job)
-        runner.pending = future
-        future.add_done_callback(functools.partial(self._converted, runner))
+        self.settle_now(runner)
+        runner.pending = PendingConversion(reads, self._wall(), self._mono(), time.monotonic() - t0)
         return True
 
-    def _converter(self) -> concurrent.futures.ThreadPoolExecutor:
-        if self._executor is None:
-            self._executor = concurrent.futures.ThreadPoolExecutor(
-                max_workers=1, thread_name_prefix=f"tactile-convert-{self.name}"
-            )
-        return self._executor
+    async def _read_overlapping(self, runner: DeviceRunner, req: ReadRequest) -> list[int]:
+        """``_read``, with the deferred conversions run while the device answers.
 
-    def _converted(self, runner: DeviceRunner, future: asyncio.Future[_Converted]) -> None:
-        """Apply a finished conversion (in the loop thread; once, in poll order)."""
-        if runner.pending is not future:
+        The read task takes its first step (building and sending the request, up to the
+        wait for the answer) before the conversion callback queued behind it: the event
+        loop runs ready callbacks in order.
+        """
+        read = asyncio.ensure_future(self._read(runner, req))
+        asyncio.get_running_loop().call_soon(self.settle_all)
+        return await read
+
+    def _has_pending(self) -> bool:
+        return any(r.pending is not None for r in self.runners)
+
+    def settle_all(self) -> None:
+        """Convert and publish every deferred poll of this bus now."""
+        for runner in self.runners:
+            self.settle_now(runner)
+
+    def settle_now(self, runner: DeviceRunner) -> None:
+        """Convert and publish the device's deferred poll (if any) now. Never raises: a
+        failed conversion marks the device, not the bus task."""
+        pending, runner.pending = runner.pending, None
+        if pending is None:
             return
-        runner.pending = None
-        if future.cancelled():
-            return
-        exc = future.exception()
-        if exc is not None:  # bad data must never end the loop
+        t0 = time.monotonic()
+        try:
+            raw = decode_sample(runner.processor.device, RegisterImage.from_reads(pending.reads))
+            snap, state = runner.processor.process(
+                runner.state, raw, pending.wall_time_s, pending.host_time_s
+            )
+        except Exception as exc:  # bad data must never end the loop
             if not isinstance(exc, DeviceError):
                 log.error("device %s: conversion failed", runner.config.name, exc_info=exc)
                 exc = DecodeError(f"conversion failed: {exc}")
             runner.tally.error("decode")
             self._fail(runner, exc)
             return
-        snap, state, duration_s = future.result()
         runner.state = state
         runner.failures = 0
         runner.next_attempt = 0.0
         runner.last_error = None
-        runner.tally.poll(duration_s)
+        runner.tally.poll(pending.reads_duration_s + (time.monotonic() - t0))
         self._publish(runner, snap)
 
     async def settle(self, runner: DeviceRunner) -> None:
-        """Wait until the device's conversion in flight (if any) is applied."""
-        future = runner.pending
-        if future is not None:
-            await asyncio.wait({future})
-            self._converted(runner, future)
+        """Convert and publish the device's deferred poll (if any) now."""
+        self.settle_now(runner)
 
     def _fall_back(self, runner: DeviceRunner, req: ReadRequest) -> bool:
         """After exception 2 (illegal address): drop the clock, then the merging. True if
@@ -388,7 +389,7 @@ class BusWorker:
         except DeviceConnectionError as exc:
             self.connect_failures += 1
             for runner in self.runners:
-                await self.settle(runner)
+                self.settle_now(runner)
                 runner.tally.read()
                 runner.tally.error("connection")
                 self._fail_quiet(runner, exc)
@@ -408,18 +409,24 @@ class BusWorker:
         snap, runner.state = runner.processor.stale(runner.state, self._wall(), str(exc))
         self._publish(runner, snap)
 
-    async def poll_cycle(self) -> None:
-        """Poll every device that is due once (connecting first if needed)."""
-        if not self.transport.connected and not await self._connect():
-            return
-        for runner in self.runners:
-            if self._mono() < runner.next_attempt:
-                continue
-            try:
-                await self.poll_device(runner)
-            except DeviceConnectionError:
-                await self.transport.close()
+    async def poll_cycle(self, *, settle: bool = True) -> None:
+        """Poll every device that is due once (connecting first if needed). With ``settle``
+        the last conversions run before returning; without, they wait to overlap the first
+        request of the next cycle (back-to-back polling)."""
+        try:
+            if not self.transport.connected and not await self._connect():
                 return
+            for runner in self.runners:
+                if self._mono() < runner.next_attempt:
+                    continue
+                try:
+                    await self.poll_device(runner)
+                except DeviceConnectionError:
+                    await self.transport.close()
+                    return
+        finally:
+            if settle:
+                self.settle_all()
 
     async def run(self) -> None:
         """Poll forever (until cancelled)."""
@@ -427,8 +434,11 @@ class BusWorker:
         next_cycle = self._mono()
         while not self._stopping:
             try:
-                await self.poll_cycle()
+                # a cycle due at once (the bus is busy back to back) overlaps the previous
+                # cycle's last conversions with its first request
+                await self.poll_cycle(settle=False)
             except asyncio.CancelledError:
+                self.settle_all()
                 raise
             except Exception:  # the loop must survive anything
                 log.exception("bus %s: unexpected error in the poll cycle", self.name)
@@ -442,7 +452,11 @@ class BusWorker:
                 next_cycle += interval
                 if next_cycle < now:  # overran: start again from now, no catch-up burst
                     next_cycle = now
-            await asyncio.sleep(max(0.0, next_cycle - now))
+            if next_cycle > now:
+                self.settle_all()
+                await asyncio.sleep(next_cycle - now)
+            else:
+                await asyncio.sleep(0)
 
     def start(self) -> None:
         self._stopping = False
@@ -463,12 +477,8 @@ class BusWorker:
         await self.close()
 
     async def close(self) -> None:
-        """Apply the conversions in flight, end the converter thread, close the transport."""
-        for runner in self.runners:
-            await self.settle(runner)
-        executor, self._executor = self._executor, None
-        if executor is not None:
-            executor.shutdown(wait=True)  # idle after settle(): joins the thread at once
+        """Convert the deferred polls, close the transport."""
+        self.settle_all()
         await self.transport.close()
 
 

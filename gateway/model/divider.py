@@ -74,20 +74,28 @@ class Divider:
         Open reads +inf, short reads 0; out-of-range or NaN counts read NaN. Never divides
         by zero.
         """
-        c = np.asarray(counts, dtype=np.float64)
-        fs = float(self.full_scale)
-        with np.errstate(invalid="ignore"):
-            invalid = ~np.isfinite(c) | (c < 0.0) | (c > fs)
-            open_ = ~invalid & (c == 0.0)
-            short = ~invalid & (c == fs)
-        ok = ~(invalid | open_ | short)
-        safe = np.where(ok, c, 1.0)
-        r = self.reference_ohm * (fs / safe - 1.0)
-        r = np.where(open_, np.inf, np.where(short, 0.0, np.where(invalid, np.nan, r)))
-        status = np.zeros(c.shape, dtype=np.int8)
-        status[open_] = int(DividerStatus.OPEN)
-        status[short] = int(DividerStatus.SHORT)
-        status[invalid] = int(DividerStatus.INVALID)
+        fs = self.full_scale
+        raw = np.asarray(counts)
+        if raw.dtype.kind in "iu":  # integer counts (the polling path): no NaN to look for
+            open_ = raw == 0
+            short = raw == fs
+            invalid = (raw > fs) | (raw < 0) if raw.dtype.kind == "i" else raw > fs
+            with np.errstate(divide="ignore"):
+                r = (fs / raw - 1.0) * self.reference_ohm  # 0 counts: +inf; full scale: 0
+        else:
+            c = raw.astype(np.float64)
+            with np.errstate(invalid="ignore"):
+                invalid = ~np.isfinite(c) | (c < 0.0) | (c > fs)
+                open_ = ~invalid & (c == 0.0)
+                short = ~invalid & (c == fs)
+            ok = ~(invalid | open_ | short)
+            r = self.reference_ohm * (fs / np.where(ok, c, 1.0) - 1.0)
+            r[open_] = np.inf
+            r[short] = 0.0
+        status = open_.view(np.int8) + short.view(np.int8) * np.int8(int(DividerStatus.SHORT))
+        if invalid.any():
+            r = np.where(invalid, np.nan, r)
+            status[invalid] = int(DividerStatus.INVALID)
         return np.asarray(r, dtype=np.float64), status
 
 

@@ -54,10 +54,15 @@ class ForceStatus(enum.IntEnum):
 
 
 # plain ints for the hot path (numpy probes an enum member's attributes on every use)
-_NO_CONTACT, _SATURATED, _INVALID = (
+_OK, _NO_CONTACT, _SATURATED, _INVALID = (
+    int(ForceStatus.OK),
     int(ForceStatus.NO_CONTACT),
     int(ForceStatus.SATURATED),
     int(ForceStatus.INVALID),
+)
+#: Inversion status by 4 * invalid + 2 * (R >= R(force_min)) + (R <= R(force_max)).
+_STATUS_BY_CODE = np.array(
+    [_OK, _SATURATED, _NO_CONTACT, _NO_CONTACT, _INVALID, _INVALID, _INVALID, _INVALID], dtype=np.int8
 )
 
 
@@ -128,11 +133,18 @@ class SensorModel:
         self._has_leak = bool(on("leakage") and np.isfinite(self._leak).any())
         # with an open contact at rest, +inf is the model's own reading of an unloaded sensor
         self._open_at_rest = np.asarray((self._contact_k > 0.0) & np.isinf(self._leak))
+        self._closed_at_rest = ~self._open_at_rest
+        self._has_contact = bool((self._contact_k > 0.0).any())
+        self._has_series = bool((self._series != 0.0).any())
         self._a_e0 = p.area_m2 * p.e0_pa
         self._a_e0_slope = p.area_m2 * p.e0_slope_pa_per_n
+        self._neg_gamma_s0 = -self._gamma_s0
         self._hyst = p.hysteresis_strain if on("hysteresis") else np.zeros_like(k)
         self._force_ends = np.stack([p.force_min_n, p.force_max_n])
         self._log_force_ends = np.log(self._force_ends)
+        # the parts of R(force_min) and R(force_max) that no state changes
+        self._ends_strain = self._force_ends / (self._a_e0 + self._a_e0_slope * self._force_ends)
+        self._ends_fixed_ohm = self._contact_k / np.sqrt(self._force_ends) + self._series
 
     # ----------------------------------------------------------------- structure
     def has(self, effect: str) -> bool:
@@ -159,13 +171,18 @@ class SensorModel:
     def _state_strain(self, state: ModelState | None) -> FloatArray | float:
         if state is None:
             return 0.0
-        total: FloatArray | float = 0.0
+        terms: list[FloatArray] = []
         if self.has("creep"):
-            total = total + state.kv1_strain
+            terms.append(state.kv1_strain)
         if self.has("creep2"):
-            total = total + state.kv2_strain
+            terms.append(state.kv2_strain)
         if self.has("hysteresis"):
-            total = total - self._hyst * state.direction
+            terms.append(-self._hyst * state.direction)
+        if not terms:
+            return 0.0
+        total = terms[0]
+        for t in terms[1:]:
+            total = total + t
         return total
 
     def _temperature_factor(self, temperature_c: ArrayLike | None) -> FloatArray | float:
@@ -244,13 +261,12 @@ class SensorModel:
 
     # --------------------------------------------------------------------- state
     def _kelvin_log_decay(self, force_n: FloatArray, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """log of the per-step decay factors of both Kelvin elements, and kv1's target strain."""
+        """log of kv1's per-step decay factor, and its target strain, for held forces >= 0."""
         p = self.params
-        f = np.maximum(force_n, 0.0)
-        e1 = p.e1_pa + p.e1_slope_pa_per_n * f
-        mu1 = p.mu1_pa_s + p.mu1_slope_pa_s_per_n * f
-        dt = np.asarray(dt_s, dtype=np.float64)
-        return np.asarray(-e1 * dt / mu1), np.asarray(f / (p.area_m2 * e1))
+        e1 = p.e1_pa + p.e1_slope_pa_per_n * force_n
+        mu1 = p.mu1_pa_s + p.mu1_slope_pa_s_per_n * force_n
+        neg_dt = -dt_s if isinstance(dt_s, float) else -np.asarray(dt_s, dtype=np.float64)
+        return np.asarray(e1 * neg_dt / mu1), np.asarray(force_n / (p.area_m2 * e1))
 
     def relax(self, state: ModelState, dt_s: ArrayLike) -> ModelState:
         """Advance the creep state over ``dt_s`` seconds with ``state.last_force_n`` held.
@@ -293,7 +309,7 @@ class SensorModel:
         in vectorized chunks; the result equals stepping ``relax``/``record`` sample by sample.
         """
         n_t = force_n.shape[0]
-        held = np.vstack([state0.last_force_n[None, :], force_n[:-1]])  # force held before k
+        held = np.maximum(np.vstack([state0.last_force_n[None, :], force_n[:-1]]), 0.0)  # before k
         dt = np.broadcast_to(dt_s.reshape(-1, 1), force_n.shape)
         total = np.zeros_like(force_n)
         p = self.params
@@ -453,50 +469,66 @@ class SensorModel:
         p = self.params
         strain = np.asarray(state_strain, dtype=np.float64)
         shape = r_meas.shape
-        if shape != p.r0_ohm.shape or strain.shape not in ((), shape):
-            shape = np.broadcast_shapes(r_meas.shape, p.r0_ohm.shape, strain.shape)
-            r_meas = np.broadcast_to(r_meas, shape)
-            fmin = np.broadcast_to(p.force_min_n, shape)
-            fmax = np.broadcast_to(p.force_max_n, shape)
-        else:  # one sample per channel: the polling path, kept free of broadcasting copies
-            fmin, fmax = p.force_min_n, p.force_max_n
         r0t: FloatArray = (
             p.r0_ohm
             if isinstance(temp_factor, float) and temp_factor == 1.0
             else np.asarray(temp_factor, dtype=np.float64) * p.r0_ohm
         )
-        ends = self._total_ohm(
-            self._force_ends if fmin is p.force_min_n else np.stack([fmin, fmax]), strain, r0t
-        )
+        lean = shape == p.r0_ohm.shape and strain.shape in ((), shape)
+        if lean:  # one sample per channel (the polling path): no broadcasting copies
+            fmin, fmax = p.force_min_n, p.force_max_n
+            ends = self._ends_ohm(strain, r0t)
+        else:
+            shape = np.broadcast_shapes(r_meas.shape, p.r0_ohm.shape, strain.shape)
+            r_meas = np.broadcast_to(r_meas, shape)
+            fmin = np.broadcast_to(p.force_min_n, shape)
+            fmax = np.broadcast_to(p.force_max_n, shape)
+            ends = self._total_ohm(np.stack([fmin, fmax]), strain, r0t)
         r_at_min, r_at_max = ends[0], ends[1]
-        with np.errstate(invalid="ignore"):
-            open_contact = np.isposinf(r_meas) & self._open_at_rest
-            invalid = ~(np.isfinite(r_meas) & (r_meas > 0.0)) & ~open_contact
-            no_contact = ~invalid & (r_meas >= r_at_min)
-            saturated = ~invalid & ~no_contact & (r_meas <= r_at_max)
-        solve = ~(invalid | no_contact | saturated)
-        status = (
-            no_contact * np.int8(_NO_CONTACT) + saturated * np.int8(_SATURATED) + invalid * np.int8(_INVALID)
-        ).astype(np.int8)
-        force = np.where(invalid, np.nan, np.where(saturated, fmax, 0.0))
-        if solve.any():
-            target = np.log(np.where(solve, r_meas, r_at_min))
-            if fmin is p.force_min_n:
-                lo, hi = self._log_force_ends[0].copy(), self._log_force_ends[1].copy()
+        # NaN compares false (and quietly) everywhere: it is invalid and neither end
+        invalid = ~(r_meas > 0.0) | ((r_meas == np.inf) & self._closed_at_rest)
+        code = invalid.view(np.int8) * np.int8(4)
+        code += (r_meas >= r_at_min).view(np.int8) * np.int8(2)
+        code += (r_meas <= r_at_max).view(np.int8)
+        status = _STATUS_BY_CODE[code]
+        solve = status == _OK
+        all_solve = bool(solve.all())
+        if all_solve:
+            force = np.empty(shape)
+        else:
+            force = np.where(status == _SATURATED, fmax, 0.0)
+            force[invalid] = np.nan
+        if all_solve or solve.any():
+            target = np.log(r_meas if all_solve else np.where(solve, r_meas, r_at_min))
+            if lean:
+                lo, hi = self._log_force_ends[0], self._log_force_ends[1]
             else:
-                lo, hi = np.log(fmin) + np.zeros(shape), np.log(fmax) + np.zeros(shape)
+                lo, hi = np.log(fmin), np.log(fmax)
             if guess_n is None:
                 # straight line between the range ends in (ln F, ln R)
                 lr_min, lr_max = np.log(r_at_min), np.log(np.where(r_at_max > 0, r_at_max, 1e-300))
                 frac = np.clip((lr_min - target) / np.where(lr_min > lr_max, lr_min - lr_max, 1.0), 0.0, 1.0)
                 u = lo + frac * (hi - lo)
             else:
-                g = np.asarray(guess_n, dtype=np.float64)
-                u = np.log(np.clip(np.where(np.isfinite(g), g, fmin), fmin, fmax)) + np.zeros(shape)
+                # fmax/fmin rather than clip: a NaN or infinite guess starts at the range end
+                g = np.fmin(np.fmax(np.asarray(guess_n, dtype=np.float64), fmin), fmax)
+                u = np.log(g) if g.shape == shape else np.log(g) + np.zeros(shape)
             if guess_n is None or not self._newton_fast(u, lo, hi, target, strain, r0t):
-                u = self._newton(u, lo, hi, target, strain, r0t)
-            force = np.where(solve, np.exp(u), force)
-        return Inversion(np.asarray(force, dtype=np.float64), status)
+                u = self._newton(u, lo + np.zeros(shape), hi + np.zeros(shape), target, strain, r0t)
+            if all_solve:
+                np.exp(u, out=force)
+            else:
+                force = np.where(solve, np.exp(u), force)
+        return Inversion(force, status)
+
+    def _ends_ohm(self, state_strain: FloatArray, r0: FloatArray) -> FloatArray:
+        """R(force_min) and R(force_max) per channel, shape (2, N) (``_total_ohm`` at the
+        range ends, with the parts that do not depend on the state precomputed)."""
+        eps = self._ends_strain + state_strain
+        core = r0 * (1.0 - eps) * np.exp(self._neg_gamma_s0 * eps) + self._ends_fixed_ohm
+        if self._has_leak:
+            return np.asarray(core * self._leak / (core + self._leak))
+        return np.asarray(core)
 
     def _total_ohm(self, force_n: FloatArray, state_strain: FloatArray, r0: FloatArray) -> FloatArray:
         """Total resistance for forces > 0 (the lean path of ``_breakdown`` for the inversion)."""
@@ -512,22 +544,30 @@ class SensorModel:
     ) -> tuple[FloatArray, FloatArray]:
         """g = ln R(F) - target and dg/du at F = e^u (the Newton step of both solvers).
 
-        dR_pol/dF = R0 e^(-gamma s0 eps) (-1 - gamma s0 (1 - eps)) deps/dF with
-        deps/dF = A E0(0) / (A E0(F))^2; d(k / sqrt F)/dF = -k / (2 F^1.5); a parallel
-        leakage path scales the derivative by (R_leak / (R_core + R_leak))^2.
+        With q = F / (A E0(F)) and eps = q + state strain: F dR_pol/dF =
+        -R0 e^(-gamma s0 eps) (1 + gamma s0 (1 - eps)) q A E0(0) / (A E0(F)) (F deps/dF);
+        F d(k / sqrt F)/dF = -k / (2 sqrt F); a parallel leakage path scales the derivative
+        by (R_leak / (R_core + R_leak))^2. dg/du = F dR/dF / R.
         """
         f = np.exp(u)
         den = self._a_e0 + self._a_e0_slope * f
-        eps = f / den + state_strain
+        q = f / den
+        eps = q + state_strain
         one_m = 1.0 - eps
-        ex = r0 * np.exp(-self._gamma_s0 * eps)
-        rc = self._contact_k / np.sqrt(f)
-        core = ex * one_m + rc + self._series
-        dcore = ex * (-1.0 - self._gamma_s0 * one_m) * self._a_e0 / (den * den) - 0.5 * rc / f
+        ex = r0 * np.exp(self._neg_gamma_s0 * eps)
+        core = ex * one_m
+        f_dcore = (ex * (-1.0 - self._gamma_s0 * one_m)) * (q * self._a_e0 / den)
+        if self._has_contact:
+            rc = self._contact_k / np.sqrt(f)
+            core += rc
+            f_dcore -= 0.5 * rc
+        if self._has_series:
+            core += self._series
         if self._has_leak:
             share = self._leak / (core + self._leak)
-            core, dcore = core * share, dcore * share * share
-        return np.log(core) - target, f * dcore / core
+            core *= share
+            f_dcore *= share * share
+        return np.log(core) - target, f_dcore / core
 
     def _newton_fast(
         self,
@@ -547,8 +587,8 @@ class SensorModel:
         for _ in range(max_iter):
             g, slope = self._log_gap_and_slope(u, target, state_strain, r0)
             step = g / slope
-            np.clip(u - step, lo, hi, out=u)
-            if float(np.max(np.abs(step))) < _NEWTON_STOP_STEP:
+            np.minimum(np.maximum(u - step, lo), hi, out=u)
+            if float(np.abs(step).max(initial=0.0)) < _NEWTON_STOP_STEP:
                 return True
         return False
 

@@ -424,3 +424,43 @@ def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
         assert min(delays) >= 0.05  # never a busy loop
         assert max(delays) <= cap
         assert max(delays) > 0.6 * cap  # full jitter spreads over the whole range
+
+
+@pytest.mark.parametrize("bits", [10, 12, 16])
+def test_register_lookup_tables_equal_eq_18(bits: int) -> None:
+    """Counts read from registers (uint16) are converted by lookup; every one of the 65536
+    register values must give what eq. 18 gives, values above full scale invalid."""
+    from gateway.pipeline import _adc_tables
+
+    divider = Divider(5.0, 4.7e3, bits)
+    tables = _adc_tables(divider)
+    r, status = divider.resistance(np.arange(0x10000, dtype=np.int64))
+    np.testing.assert_array_equal(tables.status, status)
+    np.testing.assert_array_equal(tables.model_ohm, r)  # NaN, inf and 0 in the same places
+    assert tables.report_ohm[0] != tables.report_ohm[0]  # open: no value to report
+    assert tables.model_with_bitmaps_ohm[0] == np.finfo(np.float64).max
+    assert tables.model_with_bitmaps_ohm[divider.full_scale] == np.finfo(np.float64).tiny
+    beyond = status[divider.full_scale + 1 :]
+    assert beyond.size == 0x10000 - 2**bits and (beyond == 3).all()  # DividerStatus.INVALID
+    assert r[1] == pytest.approx(4.7e3 * (divider.full_scale - 1))
+
+
+@pytest.mark.parametrize("bitmaps", [False, True])
+def test_register_counts_convert_as_integer_counts(bitmaps: bool) -> None:
+    """The lookup path (uint16 register values) and the formula path (int64 counts) give
+    the same snapshot, rails and faults included."""
+    dev = make_device(n=8, columns=4)
+    proc = DeviceProcessor(dev, "bus", 0.1)
+    counts = np.concatenate([counts_for([0.3, 1.0, 2.0, 6.0]), [0, 65535, 12, 65000]]).astype(np.int64)
+    bits = np.zeros(8, dtype=bool)
+    extra = {}
+    if bitmaps:
+        extra = {"open_bits": bits.copy(), "short_bits": bits.copy(), "saturated_bits": bits.copy()}
+        extra["open_bits"][3] = True
+    a, _ = proc.process(proc.initial_state(), RawSample(counts=counts, **extra), 0.0, 0.0)
+    b, _ = proc.process(proc.initial_state(), RawSample(counts=counts.astype(np.uint16), **extra), 0.0, 0.0)
+    np.testing.assert_array_equal(a.status, b.status)
+    np.testing.assert_array_equal(a.force_n, b.force_n)
+    np.testing.assert_array_equal(a.resistance_ohm, b.resistance_ohm)
+    np.testing.assert_array_equal(a.force_static_n, b.force_static_n)
+    assert len(set(a.status.tolist())) >= 3  # ok, open/no contact, short/saturated all met
