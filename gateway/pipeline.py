@@ -525,6 +525,24 @@ def channel_key(device: DeviceConfig, channel: ChannelConfig) -> tuple[object, .
     return (device.name, device.encoding, channel.index, tuple(channel.effects), channel.params)
 
 
+@dataclass(frozen=True, eq=False)
+class TrackedSample:
+    """A poll between ``DeviceProcessor.track`` and ``DeviceProcessor.finish``: per
+    channel the resistance to report and the one the model got (ohm), the base status,
+    the model's force (N) and ``ForceStatus``; the device state after the sample (its
+    ``last`` snapshot is set by ``finish``)."""
+
+    raw: RawSample
+    resistance_ohm: FloatArray
+    model_resistance_ohm: FloatArray
+    base_status: StatusArray
+    force_n: FloatArray
+    model_status: StatusArray
+    temperature_c: FloatArray | None
+    state: DeviceState
+    wall_time_s: float
+
+
 class DeviceProcessor:
     """Converts polls of one device. Holds only immutable configuration-derived objects."""
 
@@ -659,7 +677,17 @@ class DeviceProcessor:
     def process(
         self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
     ) -> tuple[DeviceSnapshot, DeviceState]:
-        """Convert one good poll. ``host_time_s`` is a monotonic clock, ``wall_time_s`` Unix time."""
+        """Convert one good poll. ``host_time_s`` is a monotonic clock, ``wall_time_s`` Unix time.
+
+        The same as ``finish(track(...))``; the two steps exist so that a caller can run
+        them at different moments (the poller runs each while a device answers).
+        """
+        return self.finish(self.track(state, raw, wall_time_s, host_time_s))
+
+    def track(
+        self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
+    ) -> TrackedSample:
+        """First step of ``process``: resistances and drift-corrected forces."""
         n = len(self.channels)
         r_out, r_model, base = self._resistance(raw)
         dt, now, use_device = self._dt(state, raw, host_time_s)
@@ -687,16 +715,25 @@ class DeviceProcessor:
                 for dst, src in zip(new, state_arrays(gstate), strict=True):
                     dst[idx] = src
             new_state_model = state_from_arrays(new)
-        code = base * np.int8(8) + model_status * np.int8(2)
+        return TrackedSample(
+            raw, r_out, r_model, base, force, model_status, temperature,
+            DeviceState(new_state_model, now, host_time_s, use_device, None), wall_time_s,
+        )  # fmt: skip
+
+    def finish(self, tracked: TrackedSample) -> tuple[DeviceSnapshot, DeviceState]:
+        """Second step of ``process``: statuses, array quantities and the snapshot."""
+        raw, base, temperature = tracked.raw, tracked.base_status, tracked.temperature_c
+        code = base * np.int8(8) + tracked.model_status * np.int8(2)
         if raw.saturated_bits is not None:
             code += raw.saturated_bits[self._pick].view(np.int8)
         status = _FINAL_STATUS[code]
         valued = _VALUED[status]
-        force = np.where(valued, force, np.nan)
+        force = np.where(valued, tracked.force_n, np.nan)
         reference = self._no_values
         if raw.reference_force_n is not None:
             reference = _read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
         q = array_quantities(force, status, self.x_mm, self.y_mm, float(self.device.pitch_mm))
+        wall_time_s = tracked.wall_time_s
         snap = DeviceSnapshot(
             device=self.device.name,
             bus=self.bus,
@@ -704,9 +741,11 @@ class DeviceProcessor:
             channel_names=self.names,
             x_mm=self.x_mm,
             y_mm=self.y_mm,
-            resistance_ohm=_read_only(r_out),
+            resistance_ohm=_read_only(tracked.resistance_ohm),
             force_n=_read_only(force),
-            static_estimate=StaticEstimate(self.groups, _read_only(r_model), temperature, _read_only(valued)),
+            static_estimate=StaticEstimate(
+                self.groups, _read_only(tracked.model_resistance_ohm), temperature, _read_only(valued)
+            ),
             reference_force_n=reference,
             status=_read_only(status),
             up=True,
@@ -724,8 +763,8 @@ class DeviceProcessor:
             if temperature is None
             else _read_only(np.asarray(temperature, dtype=np.float64)),
         )
-        new_state = DeviceState(new_state_model, now, host_time_s, use_device, snap)
-        return snap, new_state
+        s = tracked.state
+        return snap, DeviceState(s.model_state, s.last_time_s, s.last_host_time_s, s.time_from_device, snap)
 
     def stale(self, state: DeviceState, wall_time_s: float, error: str) -> tuple[DeviceSnapshot, DeviceState]:
         """The device did not answer: keep the last values, mark every channel stale.

@@ -31,7 +31,7 @@ import math
 import random
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
@@ -80,18 +80,52 @@ def error_reason(exc: BaseException) -> str:
     return "decode"
 
 
-@dataclass(frozen=True)
-class PendingConversion:
-    """The registers of a finished poll, waiting to be decoded and converted.
+class Conversion:
+    """One poll's registers on their way to a snapshot, in three steps: decode, track
+    (resistances and drift-corrected forces), finish (statuses, array quantities, the
+    snapshot). The poller runs one step at a time while a device works on an answer.
 
     ``wall_time_s`` (Unix) and ``host_time_s`` (monotonic) are taken when the reads end, so
-    that the conversion's place in time does not depend on when it runs.
+    that the result does not depend on when the steps run. ``state`` is the device state
+    the conversion starts from: conversions of one device run one after the other.
     """
 
-    reads: list[tuple[RegisterKind, int, list[int]]]
-    wall_time_s: float
-    host_time_s: float
-    reads_duration_s: float
+    def __init__(
+        self,
+        processor: DeviceProcessor,
+        state: DeviceState,
+        reads: list[tuple[RegisterKind, int, list[int]]],
+        wall_time_s: float,
+        host_time_s: float,
+        reads_duration_s: float,
+    ) -> None:
+        self._steps = self._run(processor, state, reads, wall_time_s, host_time_s)
+        self.result: tuple[DeviceSnapshot, DeviceState] | None = None
+        self.duration_s = reads_duration_s  # reads, plus the time spent in each step
+
+    @staticmethod
+    def _run(
+        processor: DeviceProcessor,
+        state: DeviceState,
+        reads: list[tuple[RegisterKind, int, list[int]]],
+        wall_time_s: float,
+        host_time_s: float,
+    ) -> Iterator[tuple[DeviceSnapshot, DeviceState] | None]:
+        raw = decode_sample(processor.device, RegisterImage.from_reads(reads))
+        yield None
+        tracked = processor.track(state, raw, wall_time_s, host_time_s)
+        yield None
+        yield processor.finish(tracked)
+
+    def step(self) -> bool:
+        """Run the next step; True once the result is there. Raises what a step raises."""
+        if self.result is None:
+            t0 = time.monotonic()
+            try:
+                self.result = next(self._steps)
+            finally:
+                self.duration_s += time.monotonic() - t0
+        return self.result is not None
 
 
 class SnapshotHolder:
@@ -139,6 +173,7 @@ class Tally:
         self.buckets = [c - p for c, p in zip(h.bucket_counts, (0, *h.bucket_counts[:-1]), strict=True)]
         self.duration_sum = h.sum
         self._frozen: DeviceCounters | None = base
+        self._errors_view: Mapping[str, int] = base.read_errors_total
 
     def read(self) -> None:
         self.reads_total += 1
@@ -148,6 +183,7 @@ class Tally:
         if reason not in self.errors:
             raise ValueError(f"unknown read error reason {reason!r}")
         self.errors[reason] += 1
+        self._errors_view = MappingProxyType(dict(self.errors))
         self._frozen = None
 
     def poll(self, duration_s: float) -> None:
@@ -162,7 +198,7 @@ class Tally:
             cumulative = tuple(itertools.accumulate(self.buckets))
             self._frozen = DeviceCounters(
                 reads_total=self.reads_total,
-                read_errors_total=MappingProxyType(dict(self.errors)),
+                read_errors_total=self._errors_view,
                 polls_total=self.polls_total,
                 poll_duration=HistogramData(self.bounds, cumulative, self.duration_sum, cumulative[-1]),
             )
@@ -184,7 +220,7 @@ class DeviceRunner:
     failures: int = 0
     next_attempt: float = 0.0
     last_error: str | None = None
-    pending: PendingConversion | None = None  # read but not yet converted
+    pending: Conversion | None = None  # read but not yet converted
 
     @property
     def counters(self) -> DeviceCounters:
@@ -287,10 +323,10 @@ class BusWorker:
             for req in runner.plan:
                 kind: RegisterKind = "input" if req.kind == "input" else "holding"
                 try:
-                    if reads or not self._has_pending():
-                        regs = await self._read(runner, req)
-                    else:
+                    if self._has_pending():
                         regs = await self._read_overlapping(runner, req)
+                    else:
+                        regs = await self._read(runner, req)
                 except DeviceExceptionResponse as exc:
                     if exc.exception_code != 2 or not self._fall_back(runner, req):
                         raise
@@ -303,22 +339,31 @@ class BusWorker:
                 raise
             return False
         self.settle_now(runner)
-        runner.pending = PendingConversion(reads, self._wall(), self._mono(), time.monotonic() - t0)
+        runner.pending = Conversion(
+            runner.processor, runner.state, reads, self._wall(), self._mono(), time.monotonic() - t0
+        )
         return True
 
     async def _read_overlapping(self, runner: DeviceRunner, req: ReadRequest) -> list[int]:
-        """``_read``, with the deferred conversions run while the device answers.
+        """``_read``, with one step of a deferred conversion run while the device answers.
 
-        The read task takes its first step (building and sending the request, up to the
-        wait for the answer) before the conversion callback queued behind it: the event
-        loop runs ready callbacks in order.
+        The step is queued as a ready callback; the read runs without suspending up to the
+        wait for the answer (the request is on the wire by then), and the event loop runs
+        ready callbacks in order before it looks for the answer. Should the read suspend
+        earlier, the step merely runs before the send.
         """
-        read = asyncio.ensure_future(self._read(runner, req))
-        asyncio.get_running_loop().call_soon(self.settle_all)
-        return await read
+        asyncio.get_running_loop().call_soon(self._step_pending)
+        return await self._read(runner, req)
 
     def _has_pending(self) -> bool:
         return any(r.pending is not None for r in self.runners)
+
+    def _step_pending(self) -> None:
+        """One step of the oldest deferred conversion on this bus."""
+        for runner in self.runners:
+            if runner.pending is not None:
+                self._advance(runner, to_end=False)
+                return
 
     def settle_all(self) -> None:
         """Convert and publish every deferred poll of this bus now."""
@@ -326,29 +371,35 @@ class BusWorker:
             self.settle_now(runner)
 
     def settle_now(self, runner: DeviceRunner) -> None:
-        """Convert and publish the device's deferred poll (if any) now. Never raises: a
-        failed conversion marks the device, not the bus task."""
-        pending, runner.pending = runner.pending, None
-        if pending is None:
+        """Convert and publish the device's deferred poll (if any) now."""
+        self._advance(runner, to_end=True)
+
+    def _advance(self, runner: DeviceRunner, to_end: bool) -> None:
+        """Run one step (or all) of the device's deferred conversion; publish it once done.
+        Never raises: a failed conversion marks the device, not the bus task."""
+        conversion = runner.pending
+        if conversion is None:
             return
-        t0 = time.monotonic()
         try:
-            raw = decode_sample(runner.processor.device, RegisterImage.from_reads(pending.reads))
-            snap, state = runner.processor.process(
-                runner.state, raw, pending.wall_time_s, pending.host_time_s
-            )
+            done = conversion.step()
+            while to_end and not done:
+                done = conversion.step()
         except Exception as exc:  # bad data must never end the loop
+            runner.pending = None
             if not isinstance(exc, DeviceError):
                 log.error("device %s: conversion failed", runner.config.name, exc_info=exc)
                 exc = DecodeError(f"conversion failed: {exc}")
             runner.tally.error("decode")
             self._fail(runner, exc)
             return
-        runner.state = state
+        if conversion.result is None:
+            return
+        runner.pending = None
+        snap, runner.state = conversion.result
         runner.failures = 0
         runner.next_attempt = 0.0
         runner.last_error = None
-        runner.tally.poll(pending.reads_duration_s + (time.monotonic() - t0))
+        runner.tally.poll(conversion.duration_s)
         self._publish(runner, snap)
 
     async def settle(self, runner: DeviceRunner) -> None:

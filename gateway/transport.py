@@ -261,9 +261,7 @@ class ModbusTransport:
                 raise DeviceConnectionError(f"bus {self.name!r}: not connected to {self.target}")
             self._rx_seen = False
             try:
-                # pymodbus enforces timeout_s; the outer bound only guards against a hang
-                async with asyncio.timeout(2.0 * self.timeout_s + 1.0):
-                    response = await call(client)
+                response = await call(client)  # pymodbus bounds the wait by timeout_s
             except ConnectionException as exc:
                 raise DeviceConnectionError(f"{what}: connection to {self.target} lost: {exc}") from exc
             except ModbusIOException as exc:

@@ -13,7 +13,10 @@ respond) over Modbus/TCP.
 Line timing (serial): a real RS-485 line needs time to carry the frames. With
 ``line_timing=True`` each response is held back until ``(request bytes + response bytes +
 2 x 3.5) x 11 bits / baud + turnaround_s`` after the request arrived: both frames at 11 bits
-per character plus the 3.5-character silent interval that ends each frame.
+per character plus the 3.5-character silent interval that ends each frame. The response
+goes out within about 0.1 ms of that moment: the event-loop timer (which can fire a
+millisecond or two late) wakes 2.5 ms early and a short blocking sleep waits out the rest;
+on a half-duplex line nothing else can happen meanwhile.
 
 Fault injection (``SimArray.faults``) happens per request in the connection handler: delay,
 no response, exception response, garbled frame (RTU: bad CRC; Modbus/TCP: bad protocol id)
@@ -26,6 +29,7 @@ import asyncio
 import contextlib
 import os
 import ssl
+import time
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -47,6 +51,8 @@ from .faults import NO_FAULT, FaultDecision
 BITS_PER_CHAR = 11
 #: Silent interval that ends an RTU frame, in characters.
 FRAME_GAP_CHARS = 3.5
+#: How long before a response is due on an emulated line its timer fires (s).
+LINE_TIMER_LEAD_S = 0.0025
 _BIT_FUNCTIONS = frozenset({1, 2, 5, 15})
 _INPUT_FUNCTIONS = frozenset({4})
 
@@ -246,18 +252,26 @@ class _SimHandler(ServerRequestHandler):
         delay = decision.delay_s
         if line is not None:
             delay += line.transaction_s(self._request_bytes, len(packet))
-        delay -= self.loop.time() - self._arrival_s
-        if delay <= 0.0:
+        due = self._arrival_s + delay
+        if due <= self.loop.time():
             self.send(packet, addr)
             return
         key = self._next_timer
         self._next_timer += 1
-        self._timers[key] = self.loop.call_later(delay, self._send_later, key, packet, addr)
+        # an event-loop timer fires up to a millisecond or two late (epoll counts whole
+        # milliseconds): on a line, wake early and wait out the rest precisely
+        lead = LINE_TIMER_LEAD_S if line is not None else 0.0
+        self._timers[key] = self.loop.call_at(due - lead, self._send_later, key, packet, addr, due)
 
-    def _send_later(self, key: int, packet: bytes, addr: tuple[Any, ...] | None) -> None:
+    def _send_later(self, key: int, packet: bytes, addr: tuple[Any, ...] | None, due: float) -> None:
         self._timers.pop(key, None)
-        if self.transport and not self.is_closing:
-            self.send(packet, addr)
+        if not self.transport or self.is_closing:
+            return
+        remaining = due - self.loop.time()
+        if remaining > 0.0:
+            # a serial line carries one transaction at a time: nothing else is waiting
+            time.sleep(remaining)
+        self.send(packet, addr)
 
 
 def _garble(packet: bytes, rtu: bool) -> bytes:
