@@ -255,6 +255,7 @@ class BusWorker:
         self.runners = runners
         self._publish = publish
         self.transport = transport_factory(bus)
+        self._quiet_s = self.transport.quiet_after_send_s
         self._rng = rng or random.Random()
         self._wall = wall_clock
         self._mono = monotonic
@@ -347,12 +348,16 @@ class BusWorker:
     async def _read_overlapping(self, runner: DeviceRunner, req: ReadRequest) -> list[int]:
         """``_read``, with one step of a deferred conversion run while the device answers.
 
-        The step is queued as a ready callback; the read runs without suspending up to the
-        wait for the answer (the request is on the wire by then), and the event loop runs
-        ready callbacks in order before it looks for the answer. Should the read suspend
-        earlier, the step merely runs before the send.
+        The step is a timer due when the request is out (at once over a network, after the
+        request's own wire time on a serial line); the event loop runs a due timer on its
+        next pass, after that pass's I/O callbacks. By then the request has been written:
+        the read runs without suspending up to the wait for the answer. On a serial line
+        the wait also leaves the CPU to whatever carries the bytes (a relay such as socat,
+        in tests) while they go out. Should the read suspend earlier, the step merely runs
+        before the send.
         """
-        asyncio.get_running_loop().call_soon(self._step_pending)
+        loop = asyncio.get_running_loop()
+        loop.call_at(loop.time() + self._quiet_s, self._step_pending)
         return await self._read(runner, req)
 
     def _has_pending(self) -> bool:

@@ -133,6 +133,17 @@ class ModbusTransport:
         """True when frames carry no transaction id (RTU): a late answer could be misread."""
         return self.bus.kind in ("rtu", "rtu-over-tcp")
 
+    @property
+    def quiet_after_send_s(self) -> float:
+        """How long after a request is written no answer can be there yet (s): on a serial
+        line the request itself takes (8 bytes + 3.5 characters of silence) x bits per
+        character / baud to go out; over a network, no time at all."""
+        b = self.bus
+        if b.kind != "rtu":
+            return 0.0
+        bits_per_char = 1 + int(b.bytesize) + (0 if str(b.parity) == "N" else 1) + int(b.stopbits)
+        return (8 + 3.5) * bits_per_char / float(b.baudrate)
+
     def _make_client(self) -> AsyncModbusTcpClient | AsyncModbusSerialClient:
         b = self.bus
         common: dict[str, Any] = {
@@ -219,7 +230,27 @@ class ModbusTransport:
             reason = self._connect_error or "no connection"
             await self.close()
             raise DeviceConnectionError(f"bus {self.name!r}: cannot connect to {self.target}: {reason}")
+        if self.bus.kind == "rtu":
+            self._write_requests_at_once(client)
         log.info("bus %s: connected to %s", self.name, self.target)
+
+    @staticmethod
+    def _write_requests_at_once(client: Any) -> None:
+        """pymodbus' serial transport (3.16) buffers a frame and writes it when the event
+        loop next finds the port writable, one pass later; the line (and the device's
+        answer) waits for that. Write at once instead: a serial line carries one request
+        at a time, so the port is writable. Left as is when the transport is not the one
+        expected."""
+        transport: Any = getattr(client.ctx, "transport", None)
+        write, write_ready = getattr(transport, "write", None), getattr(transport, "intern_write_ready", None)
+        if transport is None or not (callable(write) and callable(write_ready)):
+            return
+
+        def write_at_once(data: bytes) -> None:
+            write(data)
+            write_ready()
+
+        transport.write = write_at_once
 
     async def close(self) -> None:
         """Close the connection; safe to call at any time and more than once."""
