@@ -5,6 +5,12 @@ of its devices: the coalesced reads of ``read_plan``, one request at a time, eac
 up to ``retries`` times on a timeout or a garbled answer. The registers go through the
 pure ``pipeline`` and a new ``GatewaySnapshot`` is published after every device poll.
 
+The conversion of a poll (decode, drift-corrected forces, snapshot) is a ``Conversion`` of
+three steps. When the bus has more requests to make at once (back-to-back polling, or the
+next device of the cycle), each step runs while a device works on the answer to one of
+them, so the CPU work hides in time the bus task would spend waiting; before the task
+sleeps, whatever is left runs at once. Every poll is converted, in order, exactly once.
+
 Failure handling:
 
 * a device that does not answer is marked stale (last values kept) and is tried again
