@@ -371,3 +371,44 @@ async def test_back_to_back_polls_are_each_converted_once_in_order() -> None:
         np.testing.assert_array_equal(again.force_n, snap.force_n)
         loaded += int(np.count_nonzero(snap.status == ChannelStatus.OK))
     assert loaded > 0, "no loaded channel was converted: the check above proves little"
+
+
+async def test_a_failing_conversion_step_marks_its_poll_and_the_bus_goes_on(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A step that raises (a bug, or data the model cannot take) ends that poll only: it is
+    counted as a decode error, the device shows the error, and the next polls convert."""
+    array = holds_array(channels=4, columns=2)
+    async with serve_tcp([array], host="127.0.0.1", port=0) as server:
+        device = array_device(array, "arr")
+        bus = bus_config_for("tcp", "tcp", [device], host="127.0.0.1", port=server.port)
+        poller = Poller(gateway_config_for([bus]))
+        worker, runner = poller.workers[0], poller.workers[0].runners[0]
+        processor = runner.processor
+        track, calls = processor.track, 0
+
+        def failing_third_track(*args: object, **kwargs: object) -> object:
+            nonlocal calls
+            calls += 1
+            if calls == 3:
+                raise RuntimeError("boom")
+            return track(*args, **kwargs)  # type: ignore[arg-type]
+
+        processor.track = failing_third_track  # type: ignore[method-assign,assignment]
+        published: list[DeviceSnapshot] = []
+        poller.holder.subscribe(lambda s: published.append(s.devices["arr"]))
+        await worker.transport.connect()
+        try:
+            for _ in range(8):
+                assert await worker.poll_device(runner)
+            await worker.poll_cycle()
+        finally:
+            await worker.close()
+    assert calls == 9
+    failed = [s for s in published if not s.up]
+    assert len(failed) == 1 and failed[0].error == "conversion failed: boom"
+    assert published.index(failed[0]) == 2  # in poll order
+    assert all(s.up for s in published[3:]) and len(published) == 9
+    assert runner.counters.read_errors_total["decode"] == 1
+    assert runner.counters.polls_total == 8
+    assert "conversion failed" in caplog.text
