@@ -116,7 +116,8 @@ class SnapshotCollector:
         )
         duration = HistogramMetricFamily(
             "tactile_poll_duration_seconds",
-            "Duration in seconds (s) of successful polls of the device (all reads and the conversion)",
+            "Duration in seconds (s) of successful polls of the device "
+            "(all reads plus the CPU time of the conversion)",
             labels=["device"],
         )
         interval = GaugeMetricFamily(
