@@ -174,3 +174,46 @@ def test_series_with_every_effect_matches_the_online_loop() -> None:
         inv, state = m.track(measured.total_ohm[k], state, t[k] - t[k - 1] if k else 0.0, temp[k])
         assert inv.force_n[0] == pytest.approx(f[k, 0], rel=1e-7)
         assert series.force_n[k, 0] == pytest.approx(f[k, 0], rel=1e-7)
+
+
+_SPECIAL_OHM = [np.nan, np.inf, -np.inf, 0.0, -1.0, 1e-300, 1.0, 1e12, np.finfo(np.float64).max]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    picks=st.lists(
+        st.one_of(
+            st.floats(0.02, 11.0).map(lambda f: ("force", f)),
+            st.sampled_from(_SPECIAL_OHM).map(lambda r: ("ohm", r)),
+        ),
+        min_size=1,
+        max_size=12,
+    ),
+    creep_fraction=st.floats(0.0, 1.0),
+    guess_n=st.one_of(st.none(), st.floats(0.0, 20.0), st.sampled_from([np.nan, np.inf, -1.0])),
+    effects=st.sampled_from([PAPER, "tunneling", "tunneling,contact,creep,series_resistance,leakage"]),
+)
+def test_the_polling_path_and_the_bulk_path_of_the_inversion_agree(
+    picks: list[tuple[str, float]], creep_fraction: float, guess_n: float | None, effects: str
+) -> None:
+    """One sample per channel (the poll loop's lean path) and the same sample as a (1, N)
+    series (the broadcasting path) give the same statuses and forces, for resistances
+    inside the range, at and beyond its ends, and invalid ones, from any start guess."""
+    n = len(picks)
+    params = SensorParams(force_min_n=0.05, force_max_n=10.0, series_resistance_ohm=500.0,
+                          leakage_resistance_ohm=5e6)  # fmt: skip
+    m = SensorModel(effects, [params] * n)
+    kv = creep_fraction * 1e-3
+    state = ModelState(np.full(n, kv), np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
+    forces = np.array([v if kind == "force" else 1.0 for kind, v in picks])
+    r = m.resistance(forces, state)
+    r = np.array([r[i] if kind == "force" else v for i, (kind, v) in enumerate(picks)])
+    guess = None if guess_n is None else np.full(n, guess_n)
+    lean = m.invert(r, state, guess_n=guess)
+    bulk = m.invert(r[None, :], state, guess_n=None if guess is None else guess[None, :])
+    np.testing.assert_array_equal(lean.status, bulk.status[0])
+    np.testing.assert_allclose(lean.force_n, bulk.force_n[0], rtol=1e-9, equal_nan=True)
+    ok = lean.status == ForceStatus.OK
+    np.testing.assert_allclose(lean.force_n[ok], forces[ok], rtol=1e-6)
+    assert np.isnan(lean.force_n[lean.status == ForceStatus.INVALID]).all()
+    assert np.isfinite(lean.force_n[lean.status != ForceStatus.INVALID]).all()
