@@ -32,8 +32,14 @@ from pathlib import Path
 
 from pymodbus.client import AsyncModbusTcpClient
 
-from gateway.cli.run_cmd import bus_config_for, device_config_for, gateway_config_for
-from gateway.config import BusConfig, DeviceConfig, ReadRequest
+from gateway.config import (
+    BusConfig,
+    DeviceConfig,
+    ReadRequest,
+    bus_config_for,
+    device_config_for,
+    gateway_config_for,
+)
 from gateway.model import Divider
 from gateway.pipeline import RegisterImage, RegisterKind, decode_sample
 from gateway.poller import DeviceRunner, Poller

@@ -769,7 +769,11 @@ def _network_host(table: _Table, key: str) -> str:
     return host
 
 
-def _parse_bus(ctx: _Context, path: str, data: dict[str, Any]) -> BusConfig:
+def _parse_bus(
+    ctx: _Context, path: str, data: dict[str, Any], built: Sequence[DeviceConfig] | None = None
+) -> BusConfig:
+    """A ``[[bus]]`` table; its devices from its ``[[bus.device]]`` tables, or ``built``
+    (devices built in code) given instead and checked the same way."""
     table = _Table(ctx, data, path, _BUS_KEYS)
     name = table.name("name")
     kind = table.choice("kind", _REQUIRED, BUS_KINDS)
@@ -817,12 +821,17 @@ def _parse_bus(ctx: _Context, path: str, data: dict[str, Any]) -> BusConfig:
         " s (>= backoff_initial_s)",
     )
 
-    device_items = table.tables("device", "[[bus.device]]")
-    if not device_items:
+    if built is None:
+        device_items = table.tables("device", "[[bus.device]]")
+        devices = tuple(_parse_device(ctx, dpath, item) for dpath, item in device_items)
+        dpaths = [dpath for dpath, _ in device_items]
+    else:
+        devices = tuple(built)
+        dpaths = [f"{path}.device {dev.name!r}" for dev in devices]
+    if not devices:
         raise table.error("device", "at least one [[bus.device]] table is required per bus")
-    devices = tuple(_parse_device(ctx, dpath, item) for dpath, item in device_items)
     seen_ids: dict[int, str] = {}
-    for (dpath, _), dev in zip(device_items, devices, strict=True):
+    for dpath, dev in zip(dpaths, devices, strict=True):
         if dev.device_id in seen_ids:
             raise ctx.error(
                 f"{dpath}.device_id",
@@ -1180,3 +1189,98 @@ def device_plan(
     ``merge_gap`` registers) plus the device clock when ``clock``."""
     plan = tuple(read_plan(device, max_read_registers, max_gap=merge_gap))
     return plan_with_device_time(plan, max_read_registers) if clock else plan
+
+
+# --------------------------------------------------------------------------- built in code
+def _tables_of(value: object) -> dict[str, Any]:
+    """A frozen dataclass as the TOML table the parser reads (None addresses as -1)."""
+    return {k: (-1 if v is None else v) for k, v in vars(value).items()}
+
+
+def device_config_for(
+    name: str,
+    device_id: int,
+    params: Sequence[SensorParams],
+    columns: int,
+    pitch_mm: float,
+    *,
+    encoding: str = "adc",
+    divider: Divider | None = None,
+    effects: Sequence[str] = PAPER_EFFECTS,
+    registers: RegisterMap | None = None,
+    allow_write: bool = False,
+) -> DeviceConfig:
+    """A device of ``len(params)`` channels laid out row-major (``x = (i % columns) * pitch``),
+    built in code (the demo describes the array it simulates; tests and benchmarks do the
+    same) and validated exactly as a ``[[bus.device]]`` table of a configuration file.
+    ``ConfigError`` names the offending key."""
+    defaults = vars(SensorParams())
+    table: dict[str, Any] = {
+        "name": name,
+        "device_id": device_id,
+        "encoding": encoding,
+        "channels": len(params),
+        "columns": columns,
+        "pitch_mm": float(pitch_mm),
+        "allow_write": allow_write,
+        "registers": _tables_of(registers or RegisterMap()),
+        "divider": _tables_of(divider or Divider()),
+        "model": {"effects": list(effects)},
+        "channel": [
+            {"index": i, "params": {k: v for k, v in vars(p).items() if v != defaults[k]}}
+            for i, p in enumerate(params)
+        ],
+    }
+    return _parse_device(_Context(None), f"device {name!r}", table)
+
+
+def bus_config_for(
+    name: str,
+    kind: str,
+    devices: Sequence[DeviceConfig],
+    *,
+    host: str | None = None,
+    port: int | None = None,
+    serial_port: str | None = None,
+    baudrate: int = 115200,
+    tls: TlsConfig | None = None,
+    timeout_s: float = 0.5,
+    retries: int = 1,
+    poll_interval_s: float = 0.1,
+    max_read_registers: int = 125,
+    backoff_initial_s: float = 0.1,
+    backoff_max_s: float = 2.0,
+) -> BusConfig:
+    """A bus of already built devices, validated as a ``[[bus]]`` table (see ``BusConfig``)."""
+    table: dict[str, Any] = {
+        "name": name,
+        "kind": kind,
+        "timeout_s": timeout_s,
+        "retries": retries,
+        "poll_interval_s": poll_interval_s,
+        "max_read_registers": max_read_registers,
+        "backoff_initial_s": backoff_initial_s,
+        "backoff_max_s": backoff_max_s,
+    }
+    if kind == "rtu":
+        table.update(serial_port=serial_port, baudrate=baudrate, parity="N", stopbits=1, bytesize=8)
+    else:
+        table.update(host=host, port=port)
+    if tls is not None:
+        table["tls"] = {
+            k: (str(v) if isinstance(v, Path) else v) for k, v in vars(tls).items() if v is not None
+        }
+    return _parse_bus(
+        _Context(None), f"bus {name!r}", {k: v for k, v in table.items() if v is not None}, devices
+    )
+
+
+def gateway_config_for(
+    buses: Sequence[BusConfig], host: str = "127.0.0.1", port: int = DEFAULT_METRICS_PORT
+) -> GatewayConfig:
+    """A configuration of already built buses, metrics on ``host:port``."""
+    ctx = _Context(None)
+    address = f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+    metrics = _parse_metrics(ctx, _Table(ctx, {"metrics": {"address": address}}, "", _ROOT_KEYS))
+    _check_unique_names(ctx, buses)
+    return GatewayConfig(metrics=metrics, buses=tuple(buses), source=None)

@@ -105,8 +105,8 @@ def record(config_path: Path, duration_s: float, out_path: Path, channels: str |
 async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, object]:
     from sim_device import ArrayConfig, SimArray, serve_tcp
 
+    from ..config import bus_config_for, device_config_for, gateway_config_for
     from ..model import Divider
-    from .run_cmd import bus_config_for, device_config_for, gateway_config_for
 
     creep_cfg = ArrayConfig(channels=1, columns=1, seed=7, scenario="creep-test", speed=speed)
     stair_cfg = creep_cfg.with_changes(scenario="staircase", speed=speed / 10.0)

@@ -19,7 +19,6 @@ import math
 import signal
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -27,18 +26,16 @@ import click
 from prometheus_client import CollectorRegistry
 
 from ..config import (
-    BusConfig,
-    ChannelConfig,
-    DeviceConfig,
     GatewayConfig,
     MetricsConfig,
-    RegisterMap,
-    TlsConfig,
+    bus_config_for,
+    device_config_for,
+    gateway_config_for,
     load_config,
 )
 from ..errors import ConfigError
 from ..exporter import MetricsServer, WebConfig, load_web_config, make_registry
-from ..model import PAPER_EFFECTS, Divider, SensorParams
+from ..model import Divider
 from ..pipeline import ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from ..poller import Poller, SnapshotHolder
 
@@ -46,97 +43,6 @@ log = logging.getLogger("gateway.run")
 
 EXIT_CONFIG = 2
 EXIT_UNREACHABLE = 1
-
-
-# --------------------------------------------------------------------------- config builders
-def device_config_for(
-    name: str,
-    device_id: int,
-    params: Sequence[SensorParams],
-    columns: int,
-    pitch_mm: float,
-    *,
-    encoding: str = "adc",
-    divider: Divider | None = None,
-    effects: tuple[str, ...] = PAPER_EFFECTS,
-    registers: RegisterMap | None = None,
-    allow_write: bool = False,
-) -> DeviceConfig:
-    """A device of ``len(params)`` channels laid out row-major (``x = (i % columns) * pitch``).
-
-    Used by ``demo`` to describe the simulated array it starts (its true parameters), and by
-    tests and benchmarks that do the same.
-    """
-    channels = tuple(
-        ChannelConfig(
-            index=i,
-            name=f"ch{i:02d}",
-            x_mm=float((i % columns) * pitch_mm),
-            y_mm=float((i // columns) * pitch_mm),
-            enabled=True,
-            effects=tuple(effects),
-            params=p,
-        )
-        for i, p in enumerate(params)
-    )
-    return DeviceConfig(
-        name=name,
-        device_id=device_id,
-        encoding=encoding,
-        n_channels=len(channels),
-        registers=registers or RegisterMap(),
-        divider=divider or Divider(),
-        channels=channels,
-        allow_write=allow_write,
-        columns=columns,
-        pitch_mm=float(pitch_mm),
-        calibration=None,
-    )
-
-
-def bus_config_for(
-    name: str,
-    kind: str,
-    devices: Sequence[DeviceConfig],
-    *,
-    host: str | None = None,
-    port: int | None = None,
-    serial_port: str | None = None,
-    baudrate: int = 115200,
-    tls: TlsConfig | None = None,
-    timeout_s: float = 0.5,
-    retries: int = 1,
-    poll_interval_s: float = 0.1,
-    max_read_registers: int = 125,
-    backoff_initial_s: float = 0.1,
-    backoff_max_s: float = 2.0,
-) -> BusConfig:
-    """A bus with the given devices (see ``BusConfig`` for the fields)."""
-    return BusConfig(
-        name=name,
-        kind=kind,
-        host=host,
-        port=port,
-        serial_port=serial_port,
-        baudrate=baudrate,
-        parity="N",
-        stopbits=1,
-        bytesize=8,
-        tls=tls,
-        timeout_s=timeout_s,
-        retries=retries,
-        poll_interval_s=poll_interval_s,
-        max_read_registers=max_read_registers,
-        backoff_initial_s=backoff_initial_s,
-        backoff_max_s=backoff_max_s,
-        devices=tuple(devices),
-    )
-
-
-def gateway_config_for(
-    buses: Sequence[BusConfig], host: str = "127.0.0.1", port: int = 9830
-) -> GatewayConfig:
-    return GatewayConfig(metrics=MetricsConfig(host=host, port=port), buses=tuple(buses), source=None)
 
 
 # --------------------------------------------------------------------------- helpers

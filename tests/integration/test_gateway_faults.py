@@ -19,8 +19,7 @@ from prometheus_client import CollectorRegistry, generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from test_gateway_tcp import array_device
 
-from gateway.cli.run_cmd import bus_config_for, gateway_config_for
-from gateway.config import BusConfig, DeviceConfig
+from gateway.config import BusConfig, DeviceConfig, bus_config_for, gateway_config_for
 from gateway.exporter import make_registry
 from gateway.poller import Poller, SnapshotHolder
 from sim_device import ArrayConfig, SimArray, serve_tcp

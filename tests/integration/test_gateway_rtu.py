@@ -11,7 +11,7 @@ import time
 
 from test_gateway_tcp import Recorder, array_device, drift_errors, holds_array, report, until
 
-from gateway.cli.run_cmd import bus_config_for, gateway_config_for
+from gateway.config import bus_config_for, gateway_config_for
 from gateway.pipeline import ChannelStatus
 from gateway.poller import Poller, SnapshotHolder
 from gateway.transport import ModbusTransport

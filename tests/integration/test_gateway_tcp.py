@@ -19,8 +19,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gateway.cli.run_cmd import bus_config_for, device_config_for, gateway_config_for
-from gateway.config import BusConfig, DeviceConfig, RegisterMap, TlsConfig
+from gateway.config import (
+    BusConfig,
+    DeviceConfig,
+    RegisterMap,
+    TlsConfig,
+    bus_config_for,
+    device_config_for,
+    gateway_config_for,
+)
 from gateway.errors import DeviceConnectionError, WriteNotAllowedError
 from gateway.model import Divider
 from gateway.pipeline import (

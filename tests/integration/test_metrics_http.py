@@ -28,7 +28,7 @@ from prometheus_client.parser import text_string_to_metric_families
 from test_gateway_tcp import array_device
 
 from gateway.cli import main
-from gateway.cli.run_cmd import bus_config_for, gateway_config_for
+from gateway.config import bus_config_for, gateway_config_for
 from gateway.exporter import MetricsServer, load_web_config, make_registry
 from gateway.poller import Poller, SnapshotHolder
 from sim_device import ArrayConfig, SimArray, serve_tcp

@@ -899,3 +899,33 @@ def test_plan_invariants(
         assert any(r.purpose == ("force_reference", "temperature") for r in plan)
     if status is None and not bench and encoding == "float32":
         assert len(plan) == math.ceil(2 * n / (max_read - max_read % 2))
+
+
+def test_configs_built_in_code_are_validated_like_files() -> None:
+    """The demo, tests and benchmarks build their configurations in code; the builders go
+    through the file parser's checks, so a bad value is refused with the same message."""
+    from gateway.config import bus_config_for, device_config_for, gateway_config_for
+    from gateway.model import Divider, SensorParams
+
+    params = [SensorParams(), SensorParams(r0_ohm=1.5e5)]
+    dev = device_config_for("arr", 3, params, 2, 2.5, divider=Divider(3.3, 4.7e3, 12))
+    assert [c.params.r0_ohm for c in dev.channels] == [SensorParams().r0_ohm, 1.5e5]
+    assert [(c.name, c.x_mm, c.y_mm) for c in dev.channels] == [("ch00", 0.0, 0.0), ("ch01", 2.5, 0.0)]
+    assert dev.divider == Divider(3.3, 4.7e3, 12) and dev.registers == RegisterMap()
+    bus = bus_config_for("b", "rtu", [dev], serial_port="/dev/ttyUSB0", baudrate=19200)
+    assert (bus.baudrate, bus.parity, bus.devices) == (19200, "N", (dev,))
+    config = gateway_config_for([bus], "::1", 9999)
+    assert (config.metrics.host, config.metrics.port) == ("::1", 9999)
+
+    with pytest.raises(ConfigError, match=r"device 'arr'\.pitch_mm"):
+        device_config_for("arr", 3, params, 2, -1.0)
+    with pytest.raises(ConfigError, match=r"device 'arr'\.device_id.*1\.\.247"):
+        device_config_for("arr", 300, params, 2, 2.5)
+    with pytest.raises(ConfigError, match=r"device 'arr'\.model\.effects\[1\].*did you mean 'creep'"):
+        device_config_for("arr", 3, params, 2, 2.5, effects=("tunneling", "crepe"))
+    with pytest.raises(ConfigError, match=r"bus 'b'\.baudrate.*not a standard rate"):
+        bus_config_for("b", "rtu", [dev], serial_port="/dev/ttyUSB0", baudrate=12345)
+    with pytest.raises(ConfigError, match=r"duplicate device_id 3"):
+        bus_config_for("b", "tcp", [dev, dev], host="127.0.0.1")
+    with pytest.raises(ConfigError, match="duplicate"):
+        gateway_config_for([bus, bus])

@@ -399,8 +399,7 @@ def test_poller_tally_freezes_to_the_same_counters() -> None:
 def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
     import random
 
-    from gateway.cli.run_cmd import bus_config_for
-    from gateway.config import ReadRequest, device_plan, plan_with_device_time
+    from gateway.config import ReadRequest, bus_config_for, device_plan, plan_with_device_time
     from gateway.poller import BusWorker
 
     dev = make_device(n=16, columns=4)
