@@ -3,8 +3,19 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import click
+
+#: ``-c/--config FILE``: the gateway configuration, for every command that reads one.
+config_option = click.option(
+    "-c",
+    "--config",
+    "config_path",
+    required=True,
+    type=click.Path(path_type=Path, dir_okay=False),
+    help="the gateway configuration file (TOML)",
+)
 
 
 def parse_float_list(text: str, what: str) -> list[float]:

@@ -33,6 +33,7 @@ from ..config import (
 )
 from ..errors import ConfigError
 from ..model import UnknownEffectError, parameter_names, parse_effects
+from .common import config_option
 
 __all__ = ["channels", "check_config"]
 
@@ -49,18 +50,6 @@ F = TypeVar("F", bound=Callable[..., Any])
 def _fail(message: str) -> NoReturn:
     click.echo(message, err=True)
     raise click.exceptions.Exit(EXIT_INVALID)
-
-
-def _config_option(func: F) -> F:
-    option = click.option(
-        "-c",
-        "--config",
-        "config_path",
-        required=True,
-        type=click.Path(path_type=Path, dir_okay=False),
-        help="the gateway configuration file (TOML)",
-    )
-    return option(func)
 
 
 def _device_option(func: F) -> F:
@@ -111,7 +100,7 @@ def _bus_line(bus: BusConfig) -> str:
 
 
 @click.command("check-config")
-@_config_option
+@config_option
 def check_config(config_path: Path) -> None:
     """Validate a configuration file and print the read plan of every device.
 
@@ -232,7 +221,7 @@ def channels() -> None:
 
 
 @channels.command("list")
-@_config_option
+@config_option
 @_device_option
 def list_cmd(config_path: Path, device_name: str | None) -> None:
     """List the channels of every device (or of --device)."""
@@ -262,7 +251,7 @@ def list_cmd(config_path: Path, device_name: str | None) -> None:
 
 @channels.command("show")
 @click.argument("name")
-@_config_option
+@config_option
 @_device_option
 def show_cmd(name: str, config_path: Path, device_name: str | None) -> None:
     """Show one channel with its resolved parameters and where each comes from."""
@@ -459,7 +448,7 @@ def _edit(config_path: Path, name: str, device_name: str | None, assignments: Se
 @channels.command("set")
 @click.argument("name")
 @click.argument("assignments", nargs=-1, required=True, metavar="KEY=VALUE...")
-@_config_option
+@config_option
 @_device_option
 def set_cmd(name: str, assignments: tuple[str, ...], config_path: Path, device_name: str | None) -> None:
     """Set channel settings: name, x_mm, y_mm, enabled, effects (comma list), or a sensor parameter.
@@ -473,7 +462,7 @@ def set_cmd(name: str, assignments: tuple[str, ...], config_path: Path, device_n
 
 @channels.command("enable")
 @click.argument("name")
-@_config_option
+@config_option
 @_device_option
 def enable_cmd(name: str, config_path: Path, device_name: str | None) -> None:
     """Enable a channel (enabled = true)."""
@@ -482,7 +471,7 @@ def enable_cmd(name: str, config_path: Path, device_name: str | None) -> None:
 
 @channels.command("disable")
 @click.argument("name")
-@_config_option
+@config_option
 @_device_option
 def disable_cmd(name: str, config_path: Path, device_name: str | None) -> None:
     """Disable a channel (enabled = false): it is not converted or exported."""

@@ -17,6 +17,7 @@ from ..config import GatewayConfig, RegisterMap, load_config
 from ..errors import ConfigError
 from ..poller import Poller, SnapshotHolder
 from ..recorder import LiveRecorder, RecorderStats, record_path_ok
+from .common import config_option
 
 
 def _progress(elapsed_s: float, duration_s: float, stats: RecorderStats, final: bool = False) -> None:
@@ -77,7 +78,7 @@ async def record_live(
 
 
 @click.command("record")
-@click.option("-c", "--config", "config_path", required=True, type=click.Path(dir_okay=False, path_type=Path))
+@config_option
 @click.option("--duration", "duration_s", required=True, type=click.FloatRange(min=0.0), help="seconds")
 @click.option("--out", "out_path", required=True, type=click.Path(path_type=Path), help="record CSV to write")
 @click.option("--channels", default=None, help="comma-separated channel names (default: all)")

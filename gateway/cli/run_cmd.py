@@ -38,6 +38,7 @@ from ..exporter import MetricsServer, WebConfig, load_web_config, make_registry
 from ..model import Divider
 from ..pipeline import ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from ..poller import Poller, SnapshotHolder
+from .common import config_option
 
 log = logging.getLogger("gateway.run")
 
@@ -67,14 +68,6 @@ _log_level = click.option(
     default="info",
     show_default=True,
     help="log messages from this level up (to stderr)",
-)
-_config_option = click.option(
-    "-c",
-    "--config",
-    "config_path",
-    required=True,
-    type=click.Path(path_type=Path, dir_okay=False),
-    help="gateway configuration file (TOML)",
 )
 
 
@@ -137,7 +130,7 @@ def _restart_server(
 
 
 @click.command("run")
-@_config_option
+@config_option
 @_log_level
 def run(config_path: Path, log_level: str) -> None:
     """Poll the configured buses and serve Prometheus metrics until stopped.
@@ -221,7 +214,7 @@ def snapshot_table(snap: GatewaySnapshot) -> str:
 
 
 @click.command("poll-once")
-@_config_option
+@config_option
 @click.option("--json", "as_json", is_flag=True, help="print JSON instead of a table")
 @_log_level
 def poll_once(config_path: Path, as_json: bool, log_level: str) -> None:
