@@ -317,7 +317,7 @@ class BusWorker:
 
         The conversion (decode + model) of a poll is deferred: it runs right after the
         next request on this bus has been sent, while the device works on the answer, so
-        the CPU work of one poll overlaps the wait for the next (``settle`` or the end of
+        the CPU work of one poll overlaps the wait for the next (``settle_now`` or the end of
         a poll cycle runs it at once when no request follows). Conversions of one device
         are applied in poll order, each before anything else is published for it.
 
@@ -412,10 +412,6 @@ class BusWorker:
         runner.last_error = None
         runner.tally.poll(conversion.duration_s)
         self._publish(runner, snap)
-
-    async def settle(self, runner: DeviceRunner) -> None:
-        """Convert and publish the device's deferred poll (if any) now."""
-        self.settle_now(runner)
 
     def _fall_back(self, runner: DeviceRunner, req: ReadRequest) -> bool:
         """After exception 2 (illegal address): drop the clock, then the merging. True if

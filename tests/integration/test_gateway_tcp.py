@@ -295,7 +295,7 @@ async def test_reload_keeps_the_creep_state_of_unchanged_channels() -> None:
         async with poller:
             # into the 2 N hold: the creep elements are loaded
             assert await until(lambda: array.device_time_s >= 150.0, 10.0)
-            await poller.workers[0].settle(poller.workers[0].runners[0])
+            poller.workers[0].settle_now(poller.workers[0].runners[0])
             before = poller.workers[0].runners[0].state.model_state.kv1_strain.copy()
             changed = list(device.channels)
             changed[1] = dataclasses.replace(
