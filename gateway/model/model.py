@@ -522,19 +522,23 @@ class SensorModel:
         return Inversion(force, status)
 
     def _ends_ohm(self, state_strain: FloatArray, r0: FloatArray) -> FloatArray:
-        """R(force_min) and R(force_max) per channel, shape (2, N) (``_total_ohm`` at the
-        range ends, with the parts that do not depend on the state precomputed)."""
-        eps = self._ends_strain + state_strain
-        core = r0 * (1.0 - eps) * np.exp(self._neg_gamma_s0 * eps) + self._ends_fixed_ohm
-        if self._has_leak:
-            return np.asarray(core * self._leak / (core + self._leak))
-        return np.asarray(core)
+        """R(force_min) and R(force_max) per channel, shape (2, N), from the precomputed
+        parts that do not depend on the state."""
+        return self._ohm_from_parts(self._ends_strain, self._ends_fixed_ohm, state_strain, r0)
 
     def _total_ohm(self, force_n: FloatArray, state_strain: FloatArray, r0: FloatArray) -> FloatArray:
         """Total resistance for forces > 0 (the lean path of ``_breakdown`` for the inversion)."""
-        eps = force_n / (self._a_e0 + self._a_e0_slope * force_n) + state_strain
-        core = r0 * (1.0 - eps) * np.exp(-self._gamma_s0 * eps) + self._contact_k / np.sqrt(force_n)
-        core = core + self._series
+        inst_strain = force_n / (self._a_e0 + self._a_e0_slope * force_n)
+        fixed_ohm = self._contact_k / np.sqrt(force_n) + self._series
+        return self._ohm_from_parts(inst_strain, fixed_ohm, state_strain, r0)
+
+    def _ohm_from_parts(
+        self, inst_strain: FloatArray, fixed_ohm: FloatArray, state_strain: FloatArray, r0: FloatArray
+    ) -> FloatArray:
+        """R = (R0 (1 - eps) e^(-gamma s0 eps) + contact + series) || R_leak, eps = the
+        instantaneous strain plus the state's."""
+        eps = inst_strain + state_strain
+        core = r0 * (1.0 - eps) * np.exp(self._neg_gamma_s0 * eps) + fixed_ohm
         if self._has_leak:
             return np.asarray(core * self._leak / (core + self._leak))
         return np.asarray(core)
