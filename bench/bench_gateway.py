@@ -32,17 +32,12 @@ from pathlib import Path
 
 from pymodbus.client import AsyncModbusTcpClient
 
-from gateway.config import (
-    BusConfig,
-    DeviceConfig,
-    ReadRequest,
-    bus_config_for,
-    device_config_for,
-    gateway_config_for,
-)
+from gateway.config import BusConfig, DeviceConfig, bus_config_for, device_config_for, gateway_config_for
+from gateway.modbus.image import RegisterImage, RegisterKind, decode_sample
+from gateway.modbus.plan import ReadRequest
 from gateway.model import Divider
-from gateway.pipeline import RegisterImage, RegisterKind, decode_sample
-from gateway.poller import DeviceRunner, Poller
+from gateway.runtime.bus import DeviceRunner
+from gateway.runtime.poller import Poller
 from sim_device import ArrayConfig, SimArray
 
 MEASURE_S = float(os.environ.get("BENCH_SECONDS", "5"))

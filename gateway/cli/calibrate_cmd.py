@@ -7,10 +7,10 @@ from pathlib import Path
 
 import click
 
-from ..calibration import calibrate, format_report, write_calibration
+from ..analysis.calibration import calibrate, format_report, write_calibration
+from ..analysis.records import read_record
 from ..errors import RecordError
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
-from ..records import read_record
 from .common import parse_assignments
 
 

@@ -22,16 +22,9 @@ import tomlkit
 from tomlkit.items import AoT, Array, InlineTable, Item, Table
 
 from ..atomic import atomic_write_text
-from ..config import (
-    MERGE_GAP,
-    BusConfig,
-    ChannelConfig,
-    DeviceConfig,
-    GatewayConfig,
-    device_plan,
-    parse_config,
-)
+from ..config import BusConfig, ChannelConfig, DeviceConfig, GatewayConfig, parse_config
 from ..errors import ConfigError
+from ..modbus.plan import MERGE_GAP, device_plan
 from ..model import UnknownEffectError, parameter_names, parse_effects
 from .common import config_option
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import click
 
-from ..discrepancy import decimate, run_discrepancy
+from ..analysis.discrepancy import decimate, run_discrepancy
+from ..analysis.fitting import FitData
+from ..analysis.records import read_record
 from ..errors import RecordError
-from ..fitting import FitData
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
-from ..records import read_record
 from .common import parse_assignments
 
 
@@ -50,7 +50,7 @@ def discrepancy_cmd(
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
     if out_dir is not None:
-        from ..discrepancy_report import write_report
+        from ..analysis.discrepancy_report import write_report
 
         write_report(report, FitData.from_channel(decimate(channel)), out_dir)
     if as_json:

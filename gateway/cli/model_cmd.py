@@ -115,7 +115,7 @@ def invert_cmd(resistance_text: str, effects: str, params: tuple[str, ...], as_j
 @_param_option
 def plot_cmd(out_dir: Path, effects: str, params: tuple[str, ...]) -> None:
     """Write PNGs that replay the paper's Fig. 5, 9b and 10 from the model."""
-    from ..plots import plot_model_figures
+    from ..analysis.plots import plot_model_figures
 
     m = _build(effects, params)
     for path in plot_model_figures(m, out_dir):

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import click
 
+from ..analysis.recorder import LiveRecorder, RecorderStats, record_path_ok
 from ..config import GatewayConfig, RegisterMap, load_config
 from ..errors import ConfigError
-from ..poller import Poller, SnapshotHolder
-from ..recorder import LiveRecorder, RecorderStats, record_path_ok
+from ..runtime.poller import Poller, SnapshotHolder
 from .common import config_option
 
 
@@ -144,9 +144,9 @@ async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, objec
 )
 def paper(out_dir: Path, speed: float) -> None:
     """Replay the paper's experiments on the simulated array, end to end through Modbus."""
+    from ..analysis.paper import analyze, write_outputs
+    from ..analysis.records import read_record
     from ..model import SensorParams
-    from ..paper import analyze, write_outputs
-    from ..records import read_record
 
     out_dir.mkdir(parents=True, exist_ok=True)
     click.echo(f"recording the creep tests and a staircase through Modbus (about {4810 / speed:.0f} s) ...")

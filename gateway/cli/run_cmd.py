@@ -34,10 +34,12 @@ from ..config import (
     load_config,
 )
 from ..errors import ConfigError
-from ..exporter import MetricsServer, WebConfig, load_web_config, make_registry
+from ..metrics.collector import make_registry
+from ..metrics.server import MetricsServer
+from ..metrics.web_config import WebConfig, load_web_config
 from ..model import Divider
-from ..pipeline import ChannelStatus, DeviceSnapshot, GatewaySnapshot
-from ..poller import Poller, SnapshotHolder
+from ..runtime.poller import Poller, SnapshotHolder
+from ..runtime.snapshot import ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from .common import config_option
 
 log = logging.getLogger("gateway.run")

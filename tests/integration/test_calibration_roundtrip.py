@@ -18,8 +18,8 @@ from click.testing import CliRunner
 from gateway.cli import main
 from gateway.cli.record_cmd import record_live
 from gateway.config import load_config
-from gateway.pipeline import ChannelStatus, GatewaySnapshot
-from gateway.poller import Poller, SnapshotHolder
+from gateway.runtime.poller import Poller, SnapshotHolder
+from gateway.runtime.snapshot import ChannelStatus, GatewaySnapshot
 from sim_device import ArrayConfig, Scenario, SimArray, serve_tcp
 
 BENCH_PROTOCOL = """

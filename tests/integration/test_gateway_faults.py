@@ -20,8 +20,8 @@ from prometheus_client.parser import text_string_to_metric_families
 from test_gateway_tcp import array_device
 
 from gateway.config import BusConfig, DeviceConfig, bus_config_for, gateway_config_for
-from gateway.exporter import make_registry
-from gateway.poller import Poller, SnapshotHolder
+from gateway.metrics.collector import make_registry
+from gateway.runtime.poller import Poller, SnapshotHolder
 from sim_device import ArrayConfig, SimArray, serve_tcp
 
 POLL_S = 0.05

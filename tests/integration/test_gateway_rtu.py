@@ -12,9 +12,9 @@ import time
 from test_gateway_tcp import Recorder, array_device, drift_errors, holds_array, report, until
 
 from gateway.config import bus_config_for, gateway_config_for
-from gateway.pipeline import ChannelStatus
-from gateway.poller import Poller, SnapshotHolder
-from gateway.transport import ModbusTransport
+from gateway.modbus.client import ModbusTransport
+from gateway.runtime.poller import Poller, SnapshotHolder
+from gateway.runtime.snapshot import ChannelStatus
 from sim_device import ArrayConfig, SimArray, serve_serial
 
 BAUD = 115200

@@ -29,17 +29,13 @@ from gateway.config import (
     gateway_config_for,
 )
 from gateway.errors import DeviceConnectionError, WriteNotAllowedError
+from gateway.modbus.client import ModbusTransport
+from gateway.modbus.image import RegisterImage, decode_sample
 from gateway.model import Divider
-from gateway.pipeline import (
-    ChannelStatus,
-    DeviceProcessor,
-    DeviceSnapshot,
-    GatewaySnapshot,
-    RegisterImage,
-    decode_sample,
-)
-from gateway.poller import Conversion, Poller, SnapshotHolder
-from gateway.transport import ModbusTransport
+from gateway.runtime.bus import Conversion
+from gateway.runtime.poller import Poller, SnapshotHolder
+from gateway.runtime.processor import DeviceProcessor
+from gateway.runtime.snapshot import ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from sim_device import ArrayConfig, SimArray, serve_tcp, serve_tls
 
 SPEED = 60.0

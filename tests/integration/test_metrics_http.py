@@ -29,8 +29,10 @@ from test_gateway_tcp import array_device
 
 from gateway.cli import main
 from gateway.config import bus_config_for, gateway_config_for
-from gateway.exporter import MetricsServer, load_web_config, make_registry
-from gateway.poller import Poller, SnapshotHolder
+from gateway.metrics.collector import make_registry
+from gateway.metrics.server import MetricsServer
+from gateway.metrics.web_config import load_web_config
+from gateway.runtime.poller import Poller, SnapshotHolder
 from sim_device import ArrayConfig, SimArray, serve_tcp
 
 GATEWAY = [sys.executable, "-c", "from gateway.cli import main; main()"]

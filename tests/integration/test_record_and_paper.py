@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from netutil import free_port
 
-from gateway.discrepancy import run_discrepancy
-from gateway.records import read_record
+from gateway.analysis.discrepancy import run_discrepancy
+from gateway.analysis.records import read_record
 from sim_device import ArrayConfig, record_offline
 
 BIN = Path(sys.executable).parent

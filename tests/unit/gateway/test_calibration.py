@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 from click.testing import CliRunner
 
-from gateway.calibration import calibrate
+from gateway.analysis.calibration import calibrate
+from gateway.analysis.records import format_record, read_record, write_record
 from gateway.cli import main
 from gateway.config import parse_config
 from gateway.model import ForceStatus, SensorModel, SensorParams
-from gateway.records import format_record, read_record, write_record
 
 PAPER = ("tunneling", "contact", "creep")
 TRUE = SensorParams(r0_ohm=225e3, e0_pa=13.5e6, rho2_ohm_m=0.85, e1_pa=140e6, mu1_pa_s=1.2e10)
@@ -108,7 +108,7 @@ def test_calibrate_bad_inputs_are_clear(tmp_path: Path) -> None:
 
 
 def test_a_record_too_short_to_hold_out_is_refused() -> None:
-    from gateway.records import parse_record
+    from gateway.analysis.records import parse_record
 
     rec = parse_record("time_s,resistance_ohm,force_n\n0,1e5,1\n")
     try:

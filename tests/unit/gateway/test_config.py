@@ -15,16 +15,14 @@ from gateway.config import (
     DeviceConfig,
     GatewayConfig,
     MetricsConfig,
-    ReadRequest,
     RegisterMap,
     TlsConfig,
-    block_registers,
     load_config,
     parse_config,
-    read_plan,
-    register_blocks,
 )
 from gateway.errors import ConfigError
+from gateway.modbus.plan import ReadRequest, block_registers, read_plan
+from gateway.modbus.register_map import register_blocks
 from gateway.model import PAPER_EFFECTS, Divider, SensorParams
 
 REPO = Path(__file__).resolve().parents[3]

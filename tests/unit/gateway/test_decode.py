@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from gateway.decode import (
+from gateway.errors import DecodeError
+from gateway.modbus.decode import (
     as_registers,
     decode_bitmap,
     decode_float32,
@@ -19,7 +20,6 @@ from gateway.decode import (
     encode_bitmap,
     encode_float32,
 )
-from gateway.errors import DecodeError
 
 
 def test_uint16_counts_big_and_little_byte_order() -> None:

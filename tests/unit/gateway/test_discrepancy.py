@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from gateway.analysis.discrepancy import DiscrepancyReport, run_discrepancy
+from gateway.analysis.records import ChannelRecord, read_record
 from gateway.cli import main
-from gateway.discrepancy import DiscrepancyReport, run_discrepancy
 from gateway.model import SensorParams
-from gateway.records import ChannelRecord, read_record
 from sim_device import ArrayConfig, record_offline
 
 NOISE = 0.01

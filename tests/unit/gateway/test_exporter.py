@@ -16,15 +16,13 @@ from prometheus_client.samples import Sample
 
 from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
 from gateway.errors import ConfigError
-from gateway.exporter import BasicAuth, SnapshotCollector, load_web_config, make_registry
+from gateway.metrics.collector import SnapshotCollector, make_registry
+from gateway.metrics.web_config import BasicAuth, load_web_config
+from gateway.modbus.image import RawSample
 from gateway.model import PAPER_EFFECTS, Divider, SensorModel, SensorParams
-from gateway.pipeline import (
-    ChannelStatus,
-    DeviceCounters,
-    DeviceProcessor,
-    GatewaySnapshot,
-    RawSample,
-)
+from gateway.runtime.counters import Tally
+from gateway.runtime.processor import DeviceProcessor
+from gateway.runtime.snapshot import ChannelStatus, GatewaySnapshot
 
 METRICS = {
     "tactile_force_newtons": "gauge",
@@ -65,7 +63,13 @@ def _snapshot() -> GatewaySnapshot:
     snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 1_700_000_000.0, 0.0)
     other = DeviceProcessor(_device("right", 2), "bus1", 0.2)
     stale, _ = other.stale(other.initial_state(), 1_700_000_001.0, "timeout")
-    counters = DeviceCounters().with_reads(10).with_error("timeout").with_error("decode").with_poll(0.004)
+    tally = Tally()
+    for _ in range(10):
+        tally.read()
+    tally.error("timeout")
+    tally.error("decode")
+    tally.poll(0.004)
+    counters = tally.freeze()
     return GatewaySnapshot.build({"left": snap, "right": stale}, {"left": counters}, 7)
 
 

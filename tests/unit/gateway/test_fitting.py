@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from gateway.fitting import FitData, fit_channel, record_limitations
+from gateway.analysis.fitting import FitData, fit_channel, record_limitations
+from gateway.analysis.records import ChannelRecord
 from gateway.model import SensorModel, SensorParams
-from gateway.records import ChannelRecord
 
 PAPER = ("tunneling", "contact", "creep")
 TRUE = SensorParams(r0_ohm=180e3, e0_pa=16e6, rho2_ohm_m=1.2, e1_pa=170e6, mu1_pa_s=1.9e10)

@@ -7,21 +7,17 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
-from gateway.decode import encode_bitmap, encode_float32
 from gateway.errors import DecodeError
+from gateway.modbus.decode import encode_bitmap, encode_float32
+from gateway.modbus.image import RawSample, RegisterImage, decode_sample
 from gateway.model import PAPER_EFFECTS, Divider, SensorModel, SensorParams
-from gateway.pipeline import (
-    ChannelStatus,
-    DeviceCounters,
-    DeviceProcessor,
-    HistogramData,
-    RawSample,
-    RegisterImage,
-    array_quantities,
-    decode_sample,
-)
+from gateway.runtime.counters import Tally
+from gateway.runtime.processor import DeviceProcessor
+from gateway.runtime.snapshot import ChannelStatus, array_quantities
 
 DIVIDER = Divider()
 
@@ -355,52 +351,47 @@ def test_decode_sample_from_registers() -> None:
 
 
 def test_counters_and_histogram() -> None:
-    c = DeviceCounters().with_reads().with_reads().with_error("timeout").with_poll(0.003).with_poll(0.2)
-    assert c.reads_total == 2 and dict(c.read_errors_total) == {
-        "timeout": 1,
-        "exception": 0,
-        "connection": 0,
-        "decode": 0,
-    }
+    tally = Tally()
+    for event in ("read", "read", "timeout", 0.003, 0.2, math.nan):
+        if event == "read":
+            tally.read()
+        elif event == "timeout":
+            tally.error("timeout")
+        else:
+            tally.poll(float(event))
+    c = tally.freeze()
+    assert c.reads_total == 2 and c.polls_total == 3
+    assert dict(c.read_errors_total) == {"timeout": 1, "exception": 0, "connection": 0, "decode": 0}
     h = c.poll_duration
-    assert h.count == 2 and h.sum == pytest.approx(0.203)
+    assert h.count == 2 and h.sum == pytest.approx(0.203)  # the NaN duration counts a poll, no value
     bounds = (*h.bounds, math.inf)
     assert h.bucket_counts[bounds.index(0.0025)] == 0
     assert h.bucket_counts[bounds.index(0.005)] == 1
     assert h.bucket_counts[bounds.index(0.25)] == 2
     assert h.bucket_counts[-1] == 2
-    assert HistogramData().observe(math.nan).count == 0
-    with pytest.raises(ValueError):
-        c.with_error("gremlins")
+    with pytest.raises(ValueError, match="gremlins"):
+        tally.error("gremlins")
 
 
-def test_poller_tally_freezes_to_the_same_counters() -> None:
-    from gateway.poller import Tally
-
-    rng = np.random.default_rng(0)
-    durations = [*rng.exponential(0.05, size=200), 0.001, 0.0025, 100.0]
-    expected = DeviceCounters()
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(min_value=0.0, max_value=50.0), max_size=60))
+def test_tally_histogram_counts_every_duration_at_or_below_each_bound(durations: list[float]) -> None:
     tally = Tally()
-    for k, d in enumerate(durations):
-        expected = expected.with_reads().with_poll(float(d))
-        tally.read()
-        tally.poll(float(d))
-        if k % 7 == 0:
-            expected = expected.with_error("timeout")
-            tally.error("timeout")
-    got = tally.freeze()
-    assert got.reads_total == expected.reads_total and got.polls_total == expected.polls_total
-    assert dict(got.read_errors_total) == dict(expected.read_errors_total)
-    assert got.poll_duration.bucket_counts == expected.poll_duration.bucket_counts
-    assert got.poll_duration.sum == pytest.approx(expected.poll_duration.sum)
-    assert Tally(got).freeze().poll_duration == got.poll_duration  # carried over a reload
+    for d in durations:
+        tally.poll(d)
+    h = tally.freeze().poll_duration
+    for bound, count in zip((*h.bounds, math.inf), h.bucket_counts, strict=True):
+        assert count == sum(1 for d in durations if d <= bound)
+    assert h.count == len(durations) and h.sum == pytest.approx(sum(durations))
+    assert Tally(tally.freeze()).freeze().poll_duration == h  # carried over a reload
 
 
 def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
     import random
 
-    from gateway.config import ReadRequest, bus_config_for, device_plan, plan_with_device_time
-    from gateway.poller import BusWorker
+    from gateway.config import bus_config_for
+    from gateway.modbus.plan import ReadRequest, device_plan, plan_with_device_time
+    from gateway.runtime.bus import BusWorker
 
     dev = make_device(n=16, columns=4)
     plan = device_plan(dev, 125, 15, clock=True)
@@ -429,7 +420,7 @@ def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
 def test_register_lookup_tables_equal_eq_18(bits: int) -> None:
     """Counts read from registers (uint16) are converted by lookup; every one of the 65536
     register values must give what eq. 18 gives, values above full scale invalid."""
-    from gateway.pipeline import _adc_tables
+    from gateway.runtime.processor import _adc_tables
 
     divider = Divider(5.0, 4.7e3, bits)
     tables = _adc_tables(divider)

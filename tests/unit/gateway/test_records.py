@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gateway.analysis.records import format_record, parse_record, read_record, write_record
 from gateway.errors import RecordError
-from gateway.records import format_record, parse_record, read_record, write_record
 
 GOOD = """# sensor: linqstat-7
 # source: bench 2

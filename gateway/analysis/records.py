@@ -1,4 +1,4 @@
-"""Measurement records (``shared/spec/measurement-records.md``): the strict reader and the writer.
+"""Measurement records (``docs/record-format.md``): the strict reader and the writer.
 
 A record is a CSV file, UTF-8, comma separated, with ``# key: value`` metadata lines before
 one header row, in long format (one row per sample per channel). The reader is strict about
@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .atomic import atomic_write_text
-from .errors import RecordError
+from ..atomic import atomic_write_text
+from ..errors import RecordError
 
 FloatArray = NDArray[np.float64]
 

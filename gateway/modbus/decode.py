@@ -19,7 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import DecodeError
+from ..errors import DecodeError
 
 Order = str  # "big" or "little" (validated)
 U16Array = NDArray[np.uint16]

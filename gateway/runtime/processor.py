@@ -28,69 +28,29 @@ reaches the metrics.
 
 from __future__ import annotations
 
-import enum
 import functools
-import math
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field, fields, replace
-from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, Literal, TypeVar
+from collections.abc import Sequence
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .config import DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS
-from .decode import decode_bitmap, decode_float32, decode_uint16, register_value
-from .errors import DecodeError
-from .model import Divider, DividerStatus, ForceStatus, ModelState, SensorModel
-
-if TYPE_CHECKING:
-    from .config import ChannelConfig, DeviceConfig
+from ..config import ChannelConfig, DeviceConfig
+from ..errors import DecodeError
+from ..modbus.image import RawSample
+from ..model import Divider, DividerStatus, ForceStatus, ModelState, SensorModel
+from .snapshot import (
+    VALUED,
+    ChannelStatus,
+    DeviceSnapshot,
+    StaticEstimate,
+    array_quantities,
+    frozen_copy,
+    read_only,
+)
 
 FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
 StatusArray = NDArray[np.int8]
-RegisterKind = Literal["input", "holding"]
-
-#: The three status bitmaps (open, short, saturated) are 16 registers apart.
-BITMAP_STRIDE = 16
-
-READ_ERROR_REASONS: tuple[str, ...] = ("timeout", "exception", "connection", "decode")
-
-
-class ChannelStatus(enum.IntEnum):
-    """What one channel's value means in this snapshot."""
-
-    OK = 0  # a force inside the model's range
-    NO_CONTACT = 1  # resistance at or above R(force_min): reads 0 N
-    SATURATED = 2  # at or beyond force_max (model) or ADC at a rail (device bitmap)
-    OPEN = 3  # open circuit (ADC 0 counts, +inf ohm, or the device's open bitmap)
-    SHORT = 4  # short circuit (ADC full scale, 0 ohm, or the device's short bitmap)
-    STALE = 5  # the device did not answer this poll: values are the last ones
-    ERROR = 6  # an invalid value (NaN, negative, out of range): no value
-
-    @property
-    def label(self) -> str:
-        return self.name.lower()
-
-
-STATUS_LABELS: tuple[str, ...] = tuple(s.label for s in ChannelStatus)
-
-
-_G = TypeVar("_G", bound=np.generic)
-
-
-def _read_only(a: NDArray[_G]) -> NDArray[_G]:
-    """Mark a freshly built array (no other reference to it) read-only, without a copy."""
-    a.setflags(write=False)
-    return a
-
-
-def _frozen(a: NDArray[_G]) -> NDArray[_G]:
-    out: NDArray[_G] = np.array(a, copy=True)
-    out.setflags(write=False)
-    return out
 
 
 # plain ints: numpy compares these without probing an enum member's attributes (hot path)
@@ -138,10 +98,6 @@ def _final_status_table() -> NDArray[np.int8]:
 
 
 _FINAL_STATUS = _final_status_table()
-#: Statuses whose channel carries a force (N) / counts as in contact.
-_STATUS_CODES = np.arange(len(ChannelStatus))
-_VALUED = _frozen(np.isin(_STATUS_CODES, [_CHANNEL_OK, _CHANNEL_NO_CONTACT, _CHANNEL_SATURATED]))
-_IN_CONTACT = _frozen(np.isin(_STATUS_CODES, [_CHANNEL_OK, _CHANNEL_SATURATED]))
 
 
 def _base_status(divider_status: int, open_bit: int, short_bit: int) -> int:
@@ -153,7 +109,7 @@ def _base_status(divider_status: int, open_bit: int, short_bit: int) -> int:
 
 
 #: Base status of an ADC channel by 4 * divider status + 2 * open bit + short bit (with bitmaps).
-_BASE_FROM_BITMAPS = _frozen(
+_BASE_FROM_BITMAPS = frozen_copy(
     np.array([_base_status(d, o, sh) for d in range(4) for o in (0, 1) for sh in (0, 1)], dtype=np.int8)
 )
 #: What a rail reads as when the device's bitmaps say the channel is not faulty (ohm).
@@ -178,328 +134,19 @@ def _adc_tables(divider: Divider) -> AdcTables:
     """Lookup tables of a divider, shared by every device that has it (about 2 MB)."""
     r, status = divider.resistance(np.arange(0x10000, dtype=np.int64))
     return AdcTables(
-        report_ohm=_frozen(np.where(r == np.inf, np.nan, r)),
-        model_ohm=_frozen(r),
-        model_with_bitmaps_ohm=_frozen(np.minimum(np.maximum(r, _TINY_OHM), _BIG_OHM)),
-        status=_frozen(status),
+        report_ohm=frozen_copy(np.where(r == np.inf, np.nan, r)),
+        model_ohm=frozen_copy(r),
+        model_with_bitmaps_ohm=frozen_copy(np.minimum(np.maximum(r, _TINY_OHM), _BIG_OHM)),
+        status=frozen_copy(status),
     )
 
 
 #: Base status of an ADC channel by divider status (no bitmaps: the rails are faults).
-_BASE_FROM_DIVIDER = _frozen(
+_BASE_FROM_DIVIDER = frozen_copy(
     np.array([_CHANNEL_OK, _CHANNEL_OPEN, _CHANNEL_SHORT, _CHANNEL_ERROR], dtype=np.int8)
 )
 
 
-# --------------------------------------------------------------------------- registers
-@dataclass(frozen=True)
-class RegisterBlock:
-    """Registers read by one request: ``values[k]`` is the register at ``address + k``."""
-
-    kind: RegisterKind
-    address: int
-    values: NDArray[np.uint16]
-
-    def covers(self, kind: str, address: int, count: int) -> bool:
-        return (
-            kind == self.kind
-            and self.address <= address
-            and address + count <= self.address + len(self.values)
-        )
-
-
-@dataclass(frozen=True)
-class RegisterImage:
-    """The registers one poll read, as blocks (the coalesced reads of the read plan)."""
-
-    blocks: tuple[RegisterBlock, ...] = ()
-
-    @classmethod
-    def from_reads(
-        cls, reads: Iterable[tuple[RegisterKind, int, Sequence[int] | NDArray[np.uint16]]]
-    ) -> RegisterImage:
-        blocks = []
-        for kind, address, values in reads:
-            arr = np.array(values, dtype=np.uint16)  # always a copy: the image owns it
-            arr.setflags(write=False)
-            blocks.append(RegisterBlock(kind, int(address), arr))
-        return cls(tuple(blocks))
-
-    def get(self, kind: RegisterKind, address: int, count: int) -> NDArray[np.uint16] | None:
-        """The registers ``address .. address + count - 1`` or None when not read."""
-        for b in self.blocks:
-            if b.covers(kind, address, count):
-                start = address - b.address
-                return b.values[start : start + count]
-        return None
-
-    def require(self, kind: RegisterKind, address: int, count: int, what: str) -> NDArray[np.uint16]:
-        regs = self.get(kind, address, count)
-        if regs is None:
-            raise DecodeError(f"{what}: {kind} registers {address}..{address + count - 1} were not read")
-        return regs
-
-
-@dataclass(frozen=True)
-class RawSample:
-    """One poll's measurements of all N device channels, decoded but not yet converted."""
-
-    counts: NDArray[np.integer[Any]] | None = None  # ADC counts (encoding "adc"), uint16 from registers
-    resistance_ohm: FloatArray | None = None  # ohm (encoding "float32")
-    open_bits: BoolArray | None = None
-    short_bits: BoolArray | None = None
-    saturated_bits: BoolArray | None = None
-    temperature_c: FloatArray | None = None
-    reference_force_n: FloatArray | None = None
-    device_time_s: float | None = None
-
-
-def decode_sample(device: DeviceConfig, image: RegisterImage) -> RawSample:
-    """Decode the registers of one poll of ``device`` (``DecodeError`` if any are missing)."""
-    regs = device.registers
-    n = device.n_channels
-    wo, bo = regs.word_order, regs.byte_order
-    counts = resistance = None
-    if device.encoding == "adc":
-        counts = decode_uint16(image.require("input", regs.adc_address, n, "ADC counts"), bo)
-    elif device.encoding == "float32":
-        raw = image.require("input", regs.float_address, 2 * n, "float32 resistances")
-        resistance = decode_float32(raw, wo, bo)
-    else:
-        raise DecodeError(f"unknown encoding {device.encoding!r}")
-    bitmaps: list[BoolArray | None] = [None, None, None]
-    if regs.status_address is not None:
-        n_regs = -(-n // 16)
-        for k in range(3):
-            words = image.get("input", regs.status_address + k * BITMAP_STRIDE, n_regs)
-            if words is not None:
-                bitmaps[k] = decode_bitmap(words, n, bo)
-    temperature = reference = None
-    if regs.temperature_address is not None:
-        words = image.get("input", regs.temperature_address, 2 * n)
-        if words is not None:
-            temperature = decode_float32(words, wo, bo)
-    if regs.force_reference_address is not None:
-        words = image.get("input", regs.force_reference_address, 2 * n)
-        if words is not None:
-            reference = decode_float32(words, wo, bo)
-    device_time = None
-    words = image.get("input", DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS)
-    if words is not None:
-        device_time = register_value(words.tolist(), wo, bo) / 1000.0
-    return RawSample(
-        counts, resistance, bitmaps[0], bitmaps[1], bitmaps[2], temperature, reference, device_time
-    )
-
-
-# --------------------------------------------------------------------------- snapshots
-@dataclass(frozen=True)
-class ChannelView:
-    """One channel of a snapshot, with absent values as None (never NaN or inf)."""
-
-    index: int
-    name: str
-    x_mm: float
-    y_mm: float
-    status: ChannelStatus
-    resistance_ohm: float | None
-    force_n: float | None
-    force_static_n: float | None
-    reference_force_n: float | None
-
-
-def _opt(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
-
-
-@dataclass(frozen=True, eq=False)
-class StaticEstimate:
-    """The inputs of a snapshot's static inversion (``SensorModel.invert_static``)."""
-
-    groups: tuple[tuple[NDArray[np.intp], SensorModel], ...]
-    resistance_ohm: FloatArray  # as given to the model: NaN where the channel had no value
-    temperature_c: FloatArray | None  # per snapshot channel, or None
-    valued: BoolArray  # channels whose status carries a force
-
-    def evaluate(self) -> FloatArray:
-        out = np.full(len(self.resistance_ohm), np.nan)
-        for idx, model in self.groups:
-            temp = None
-            if self.temperature_c is not None and model.has("temperature"):
-                temp = self.temperature_c[idx]
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                out[idx] = model.invert_static(self.resistance_ohm[idx], temp).force_n
-        return _read_only(np.where(self.valued & np.isfinite(out), out, np.nan))
-
-
-@dataclass(frozen=True, eq=False)
-class DeviceSnapshot:
-    """The converted result of the last poll of one device (immutable).
-
-    Arrays have one entry per enabled channel (``channel_index`` holds the device index);
-    NaN marks an absent value (see ``status``). Forces in N, resistances in ohm, positions
-    and centre of pressure in mm, contact area in mm^2, times in s.
-    """
-
-    device: str
-    bus: str
-    channel_index: IntArray
-    channel_names: tuple[str, ...]
-    x_mm: FloatArray
-    y_mm: FloatArray
-    resistance_ohm: FloatArray
-    force_n: FloatArray
-    static_estimate: StaticEstimate | None  # see ``force_static_n``
-    reference_force_n: FloatArray
-    status: StatusArray
-    up: bool
-    timestamp_s: float  # wall clock of this poll (Unix time)
-    last_success_timestamp_s: float | None  # wall clock of the last good poll
-    device_time_s: float | None  # device clock at the last good poll
-    poll_interval_s: float
-    total_force_n: float = 0.0
-    center_of_pressure_mm: tuple[float, float] | None = None
-    channels_in_contact: int = 0
-    contact_area_mm2: float = 0.0
-    peak_channel: str | None = None
-    peak_force_n: float | None = None
-    error: str | None = None  # why the last poll failed
-    temperature_c: FloatArray | None = None  # sensor temperature where the device reports it, degC
-
-    @property
-    def n_channels(self) -> int:
-        return len(self.channel_names)
-
-    @functools.cached_property
-    def force_static_n(self) -> FloatArray:
-        """Force by static inversion (no creep state), N; NaN where absent. A diagnostic,
-        so it is computed on first use (e.g. a scrape), not at every poll."""
-        if self.static_estimate is None:
-            return _read_only(np.full(self.n_channels, np.nan))
-        return self.static_estimate.evaluate()
-
-    def channels(self) -> list[ChannelView]:
-        return [
-            ChannelView(
-                index=int(self.channel_index[k]),
-                name=self.channel_names[k],
-                x_mm=float(self.x_mm[k]),
-                y_mm=float(self.y_mm[k]),
-                status=ChannelStatus(int(self.status[k])),
-                resistance_ohm=_opt(float(self.resistance_ohm[k])),
-                force_n=_opt(float(self.force_n[k])),
-                force_static_n=_opt(float(self.force_static_n[k])),
-                reference_force_n=_opt(float(self.reference_force_n[k])),
-            )
-            for k in range(self.n_channels)
-        ]
-
-    def status_counts(self) -> dict[str, int]:
-        counts = np.bincount(self.status.astype(np.int64), minlength=len(ChannelStatus))
-        return {s.label: int(counts[s]) for s in ChannelStatus}
-
-
-@dataclass(frozen=True)
-class ArrayQuantities:
-    """Whole-array quantities over the channels in contact (status ok or saturated, F > 0)."""
-
-    total_force_n: float
-    center_of_pressure_mm: tuple[float, float] | None
-    channels_in_contact: int
-    contact_area_mm2: float
-    peak_index: int | None  # position in the snapshot arrays
-    peak_force_n: float | None
-
-
-def array_quantities(
-    force_n: FloatArray, status: StatusArray, x_mm: FloatArray, y_mm: FloatArray, pitch_mm: float
-) -> ArrayQuantities:
-    """Total force (N), centre of pressure (mm), contact area (mm^2) and peak channel.
-
-    The centre of pressure is sum(F_i x_i) / sum(F_i) over channels in contact; it is None
-    (not NaN) when nothing is in contact. Contact area = channels in contact x pitch^2.
-    """
-    f = np.asarray(force_n, dtype=np.float64)
-    contact = _IN_CONTACT[np.asarray(status)] & (f > 0.0)  # NaN is never > 0
-    n = int(np.count_nonzero(contact))
-    if n == 0:
-        return ArrayQuantities(0.0, None, 0, 0.0, None, None)
-    fc = np.where(contact, f, 0.0)
-    total = float(fc.sum())
-    cop = (float(np.dot(fc, x_mm)) / total, float(np.dot(fc, y_mm)) / total)
-    peak = int(fc.argmax())  # forces in contact are > 0, the rest 0
-    return ArrayQuantities(total, cop, n, float(n * pitch_mm * pitch_mm), peak, float(f[peak]))
-
-
-# --------------------------------------------------------------------------- counters
-DEFAULT_DURATION_BUCKETS_S: tuple[float, ...] = (
-    0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
-)  # fmt: skip
-
-
-@dataclass(frozen=True)
-class HistogramData:
-    """A cumulative histogram (Prometheus semantics): ``bucket_counts[k]`` counts values
-    <= ``bounds[k]``; the last entry (bound +inf) equals ``count``."""
-
-    bounds: tuple[float, ...] = DEFAULT_DURATION_BUCKETS_S
-    bucket_counts: tuple[int, ...] = (0,) * (len(DEFAULT_DURATION_BUCKETS_S) + 1)
-    sum: float = 0.0
-    count: int = 0
-
-    def observe(self, value: float) -> HistogramData:
-        if not math.isfinite(value):
-            return self
-        counts = tuple(
-            c + (1 if value <= b else 0)
-            for c, b in zip(self.bucket_counts, (*self.bounds, math.inf), strict=True)
-        )
-        return HistogramData(self.bounds, counts, self.sum + value, self.count + 1)
-
-
-@dataclass(frozen=True)
-class DeviceCounters:
-    """Cumulative counters of one device since the gateway started."""
-
-    reads_total: int = 0
-    read_errors_total: Mapping[str, int] = field(
-        default_factory=lambda: MappingProxyType(dict.fromkeys(READ_ERROR_REASONS, 0))
-    )
-    polls_total: int = 0
-    poll_duration: HistogramData = field(default_factory=HistogramData)
-
-    def with_reads(self, n: int = 1) -> DeviceCounters:
-        return replace(self, reads_total=self.reads_total + n)
-
-    def with_error(self, reason: str) -> DeviceCounters:
-        if reason not in READ_ERROR_REASONS:
-            raise ValueError(f"unknown read error reason {reason!r}")
-        errors = dict(self.read_errors_total)
-        errors[reason] += 1
-        return replace(self, read_errors_total=MappingProxyType(errors))
-
-    def with_poll(self, duration_s: float) -> DeviceCounters:
-        return replace(
-            self, polls_total=self.polls_total + 1, poll_duration=self.poll_duration.observe(duration_s)
-        )
-
-
-@dataclass(frozen=True)
-class GatewaySnapshot:
-    """Everything the exporter shows: the last snapshot and counters of every device."""
-
-    devices: Mapping[str, DeviceSnapshot] = field(default_factory=lambda: MappingProxyType({}))
-    counters: Mapping[str, DeviceCounters] = field(default_factory=lambda: MappingProxyType({}))
-    sequence: int = 0
-
-    @classmethod
-    def build(
-        cls, devices: Mapping[str, DeviceSnapshot], counters: Mapping[str, DeviceCounters], sequence: int
-    ) -> GatewaySnapshot:
-        return cls(MappingProxyType(dict(devices)), MappingProxyType(dict(counters)), sequence)
-
-
-# --------------------------------------------------------------------------- processing
 @dataclass(frozen=True)
 class DeviceState:
     """What a device's conversion carries from one poll to the next (immutable)."""
@@ -572,7 +219,7 @@ class DeviceProcessor:
         # the enabled channels as a slice when they are all of them, in order (no copy)
         every = np.array_equal(self.index, np.arange(device.n_channels))
         self._pick: slice | NDArray[np.int64] = slice(None) if every else self.index
-        self._no_values = _frozen(np.full(len(chans), np.nan))
+        self._no_values = frozen_copy(np.full(len(chans), np.nan))
 
     @property
     def name(self) -> str:
@@ -727,11 +374,11 @@ class DeviceProcessor:
         if raw.saturated_bits is not None:
             code += raw.saturated_bits[self._pick].view(np.int8)
         status = _FINAL_STATUS[code]
-        valued = _VALUED[status]
+        valued = VALUED[status]
         force = np.where(valued, tracked.force_n, np.nan)
         reference = self._no_values
         if raw.reference_force_n is not None:
-            reference = _read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
+            reference = read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
         q = array_quantities(force, status, self.x_mm, self.y_mm, float(self.device.pitch_mm))
         wall_time_s = tracked.wall_time_s
         snap = DeviceSnapshot(
@@ -741,13 +388,13 @@ class DeviceProcessor:
             channel_names=self.names,
             x_mm=self.x_mm,
             y_mm=self.y_mm,
-            resistance_ohm=_read_only(tracked.resistance_ohm),
-            force_n=_read_only(force),
+            resistance_ohm=read_only(tracked.resistance_ohm),
+            force_n=read_only(force),
             static_estimate=StaticEstimate(
-                self.groups, _read_only(tracked.model_resistance_ohm), temperature, _read_only(valued)
+                self.groups, read_only(tracked.model_resistance_ohm), temperature, read_only(valued)
             ),
             reference_force_n=reference,
-            status=_read_only(status),
+            status=read_only(status),
             up=True,
             timestamp_s=wall_time_s,
             last_success_timestamp_s=wall_time_s,
@@ -761,7 +408,7 @@ class DeviceProcessor:
             peak_force_n=q.peak_force_n,
             temperature_c=None
             if temperature is None
-            else _read_only(np.asarray(temperature, dtype=np.float64)),
+            else read_only(np.asarray(temperature, dtype=np.float64)),
         )
         s = tracked.state
         return snap, DeviceState(s.model_state, s.last_time_s, s.last_host_time_s, s.time_from_device, snap)
@@ -772,17 +419,17 @@ class DeviceProcessor:
         The creep state is not advanced; the next good sample relaxes it over the whole gap.
         """
         n = len(self.channels)
-        stale_status = _frozen(np.full(n, _CHANNEL_STALE, dtype=np.int8))
+        stale_status = frozen_copy(np.full(n, _CHANNEL_STALE, dtype=np.int8))
         last = state.last
         if last is None:
-            nan = _frozen(np.full(n, np.nan))
+            nan = frozen_copy(np.full(n, np.nan))
             snap = DeviceSnapshot(
                 device=self.device.name,
                 bus=self.bus,
-                channel_index=_frozen(self.index),
+                channel_index=frozen_copy(self.index),
                 channel_names=self.names,
-                x_mm=_frozen(self.x_mm),
-                y_mm=_frozen(self.y_mm),
+                x_mm=frozen_copy(self.x_mm),
+                y_mm=frozen_copy(self.y_mm),
                 resistance_ohm=nan,
                 force_n=nan,
                 static_estimate=None,

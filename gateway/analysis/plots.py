@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .model import SensorModel
+from ..model import SensorModel
 
 
 def save_figure(fig: Any, path: Path) -> Path:

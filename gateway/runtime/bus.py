@@ -29,45 +29,28 @@ parameters are unchanged keep their creep state (``DeviceProcessor.carry_state``
 from __future__ import annotations
 
 import asyncio
-import bisect
 import contextlib
-import itertools
 import logging
 import math
 import random
-import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from types import MappingProxyType
 
-from .config import (
-    MERGE_GAP,
-    BusConfig,
-    DeviceConfig,
-    GatewayConfig,
-    ReadRequest,
-    device_plan,
-)
-from .errors import (
+from ..config import BusConfig, DeviceConfig
+from ..errors import (
     DecodeError,
     DeviceConnectionError,
     DeviceError,
     DeviceExceptionResponse,
     DeviceTimeoutError,
 )
-from .pipeline import (
-    DeviceCounters,
-    DeviceProcessor,
-    DeviceSnapshot,
-    DeviceState,
-    GatewaySnapshot,
-    HistogramData,
-    RegisterImage,
-    RegisterKind,
-    decode_sample,
-)
-from .transport import ModbusTransport
+from ..modbus.client import ModbusTransport
+from ..modbus.image import RegisterImage, RegisterKind, decode_sample
+from ..modbus.plan import MERGE_GAP, ReadRequest, device_plan
+from .counters import DeviceCounters, Tally
+from .processor import DeviceProcessor, DeviceState
+from .snapshot import DeviceSnapshot
 
 log = logging.getLogger(__name__)
 
@@ -134,83 +117,6 @@ class Conversion:
         return self.result is not None
 
 
-class SnapshotHolder:
-    """Holds the latest ``GatewaySnapshot``; safe to read from any thread (the exporter's).
-
-    ``subscribe`` registers a callback run (in the poller's thread) after each publish.
-    """
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._snapshot = GatewaySnapshot()
-        self._callbacks: list[Callable[[GatewaySnapshot], None]] = []
-
-    def get(self) -> GatewaySnapshot:
-        with self._lock:
-            return self._snapshot
-
-    def publish(self, snapshot: GatewaySnapshot) -> None:
-        with self._lock:
-            self._snapshot = snapshot
-            callbacks = list(self._callbacks)
-        for cb in callbacks:
-            try:
-                cb(snapshot)
-            except Exception:
-                log.exception("snapshot subscriber failed")
-
-    def subscribe(self, callback: Callable[[GatewaySnapshot], None]) -> None:
-        with self._lock:
-            self._callbacks.append(callback)
-
-
-class Tally:
-    """Mutable counters of one device inside its bus task; ``freeze()`` gives the immutable
-    ``DeviceCounters`` that snapshots carry (cached until the next change)."""
-
-    def __init__(self, base: DeviceCounters | None = None) -> None:
-        base = base or DeviceCounters()
-        self.reads_total = base.reads_total
-        self.errors = dict(base.read_errors_total)
-        self.polls_total = base.polls_total
-        h = base.poll_duration
-        self.bounds = h.bounds
-        # per-bucket (not cumulative) counts, the last one for +Inf
-        self.buckets = [c - p for c, p in zip(h.bucket_counts, (0, *h.bucket_counts[:-1]), strict=True)]
-        self.duration_sum = h.sum
-        self._frozen: DeviceCounters | None = base
-        self._errors_view: Mapping[str, int] = base.read_errors_total
-
-    def read(self) -> None:
-        self.reads_total += 1
-        self._frozen = None
-
-    def error(self, reason: str) -> None:
-        if reason not in self.errors:
-            raise ValueError(f"unknown read error reason {reason!r}")
-        self.errors[reason] += 1
-        self._errors_view = MappingProxyType(dict(self.errors))
-        self._frozen = None
-
-    def poll(self, duration_s: float) -> None:
-        self.polls_total += 1
-        if math.isfinite(duration_s):
-            self.buckets[bisect.bisect_left(self.bounds, duration_s)] += 1
-            self.duration_sum += duration_s
-        self._frozen = None
-
-    def freeze(self) -> DeviceCounters:
-        if self._frozen is None:
-            cumulative = tuple(itertools.accumulate(self.buckets))
-            self._frozen = DeviceCounters(
-                reads_total=self.reads_total,
-                read_errors_total=self._errors_view,
-                polls_total=self.polls_total,
-                poll_duration=HistogramData(self.bounds, cumulative, self.duration_sum, cumulative[-1]),
-            )
-        return self._frozen
-
-
 @dataclass
 class DeviceRunner:
     """Mutable bookkeeping of one device inside its bus task (never shared across threads)."""
@@ -231,16 +137,6 @@ class DeviceRunner:
     @property
     def counters(self) -> DeviceCounters:
         return self.tally.freeze()
-
-
-@dataclass(frozen=True)
-class ReloadReport:
-    """What a reload changed."""
-
-    devices_added: tuple[str, ...]
-    devices_removed: tuple[str, ...]
-    channels_kept: int
-    channels_reset: int
 
 
 class BusWorker:
@@ -538,176 +434,3 @@ class BusWorker:
         """Convert the deferred polls, close the transport."""
         self.settle_all()
         await self.transport.close()
-
-
-class Poller:
-    """All buses of a ``GatewayConfig``: start, reload, stop, and a single-shot poll."""
-
-    def __init__(
-        self,
-        config: GatewayConfig,
-        holder: SnapshotHolder | None = None,
-        *,
-        transport_factory: Callable[[BusConfig], ModbusTransport] = ModbusTransport,
-        rng: random.Random | None = None,
-        wall_clock: Callable[[], float] = time.time,
-        monotonic: Callable[[], float] = time.monotonic,
-    ) -> None:
-        self.config = config
-        self.holder = holder or SnapshotHolder()
-        self._transport_factory = transport_factory
-        self._rng = rng or random.Random()
-        self._wall = wall_clock
-        self._mono = monotonic
-        self._devices: dict[str, DeviceSnapshot] = {}
-        self._counters: dict[str, DeviceCounters] = {}
-        self._sequence = 0
-        self.workers: list[BusWorker] = self._build(config, {})
-        self.running = False
-
-    # ------------------------------------------------------------------ building
-    def _build(self, config: GatewayConfig, old: dict[str, DeviceRunner]) -> list[BusWorker]:
-        workers = []
-        for bus in config.buses:
-            runners = []
-            for dev in bus.devices:
-                processor = DeviceProcessor(dev, bus.name, bus.poll_interval_s)
-                previous = old.get(dev.name)
-                if previous is None:
-                    state, tally = processor.initial_state(), Tally()
-                else:
-                    state = processor.carry_state(previous.processor, previous.state)
-                    tally = previous.tally
-                # what was learnt about the device (no clock, no merged reads) carries over
-                gap = MERGE_GAP if previous is None else previous.merge_gap
-                clock = True if previous is None else previous.clock
-                plan = device_plan(dev, bus.max_read_registers, gap, clock)
-                runners.append(
-                    DeviceRunner(
-                        dev,
-                        processor,
-                        plan,
-                        state,
-                        tally=tally,
-                        max_read_registers=bus.max_read_registers,
-                        merge_gap=gap,
-                        clock=clock,
-                    )
-                )
-            workers.append(
-                BusWorker(
-                    bus,
-                    runners,
-                    self._on_device_snapshot,
-                    transport_factory=self._transport_factory,
-                    rng=self._rng,
-                    wall_clock=self._wall,
-                    monotonic=self._mono,
-                )
-            )
-        return workers
-
-    def runners(self) -> Iterable[DeviceRunner]:
-        for w in self.workers:
-            yield from w.runners
-
-    def _on_device_snapshot(self, runner: DeviceRunner, snap: DeviceSnapshot) -> None:
-        self._devices[runner.config.name] = snap
-        self._counters[runner.config.name] = runner.counters
-        self._publish_all()
-
-    def _publish_all(self) -> None:
-        self._sequence += 1
-        self.holder.publish(GatewaySnapshot.build(self._devices, self._counters, self._sequence))
-
-    def _seed_snapshots(self) -> None:
-        """Before the first poll every device is listed as stale (never polled)."""
-        names = {r.config.name for r in self.runners()}
-        for name in list(self._devices):
-            if name not in names:
-                del self._devices[name]
-                self._counters.pop(name, None)
-        for runner in self.runners():
-            if runner.config.name not in self._devices:
-                snap, runner.state = runner.processor.stale(runner.state, self._wall(), "not polled yet")
-                self._devices[runner.config.name] = snap
-            elif runner.state.last is None:
-                snap, _ = runner.processor.stale(runner.state, self._wall(), "not polled yet")
-                self._devices[runner.config.name] = snap
-            self._counters[runner.config.name] = runner.counters
-        self._publish_all()
-
-    # ------------------------------------------------------------------ lifecycle
-    async def start(self) -> None:
-        """Start one task per bus."""
-        if self.running:
-            return
-        self._seed_snapshots()
-        for w in self.workers:
-            w.start()
-        self.running = True
-
-    async def stop(self) -> None:
-        """Cancel the bus tasks and close every transport (idempotent)."""
-        self.running = False
-        await asyncio.gather(*(w.stop() for w in self.workers), return_exceptions=True)
-
-    async def __aenter__(self) -> Poller:
-        await self.start()
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.stop()
-
-    async def reload(self, config: GatewayConfig) -> ReloadReport:
-        """Replace the configuration. Channels whose physics is unchanged keep their creep
-        state; counters of devices that stay are kept. Buses reconnect."""
-        was_running = self.running
-        await self.stop()
-        old = {r.config.name: r for r in self.runners()}
-        workers = self._build(config, old)
-        new_runners = {r.config.name: r for w in workers for r in w.runners}
-        kept = reset = 0
-        for name, runner in new_runners.items():
-            n = len(runner.processor.channels)
-            k = runner.processor.kept_channels(old[name].processor) if name in old else 0
-            kept += k
-            reset += n - k
-        report = ReloadReport(
-            devices_added=tuple(sorted(set(new_runners) - set(old))),
-            devices_removed=tuple(sorted(set(old) - set(new_runners))),
-            channels_kept=kept,
-            channels_reset=reset,
-        )
-        self.config = config
-        self.workers = workers
-        self._seed_snapshots()
-        if was_running:
-            for w in self.workers:
-                w.start()
-            self.running = True
-        log.info(
-            "configuration reloaded: %d channels keep their creep state, %d start relaxed; "
-            "devices added %s, removed %s",
-            kept,
-            reset,
-            list(report.devices_added),
-            list(report.devices_removed),
-        )
-        return report
-
-    async def poll_once(self) -> GatewaySnapshot:
-        """Connect every bus, poll each device once (with retries), close; buses in parallel."""
-        self._seed_snapshots()
-
-        async def one(worker: BusWorker) -> None:
-            try:
-                await worker.poll_cycle()
-            finally:
-                await worker.close()
-
-        await asyncio.gather(*(one(w) for w in self.workers))
-        return self.holder.get()
-
-    def snapshot(self) -> GatewaySnapshot:
-        return self.holder.get()

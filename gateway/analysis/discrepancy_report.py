@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write_text
+from ..atomic import atomic_write_text
 from .discrepancy import DiscrepancyReport, Step, residual_axes
 from .fitting import FitData, FitResult
 from .plots import save_figure

@@ -23,13 +23,13 @@ import functools
 import logging
 import ssl
 from collections.abc import Awaitable, Callable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, AsyncModbusTlsClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.framer import FramerType
 
-from .errors import (
+from ..errors import (
     DecodeError,
     DeviceConnectionError,
     DeviceError,
@@ -38,9 +38,7 @@ from .errors import (
     GatewayError,
     WriteNotAllowedError,
 )
-
-if TYPE_CHECKING:
-    from .config import BusConfig, TlsConfig
+from .endpoint import Endpoint, TlsSettings
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +75,7 @@ EXCEPTION_NAMES: dict[int, str] = {
 }
 
 
-def build_ssl_context(tls: TlsConfig) -> ssl.SSLContext:
+def build_ssl_context(tls: TlsSettings) -> ssl.SSLContext:
     """Client TLS context: trust ``ca_file``, present ``cert_file``/``key_file`` if given.
 
     Certificate and host-name verification are on unless the config sets ``verify = false``.
@@ -98,7 +96,7 @@ def build_ssl_context(tls: TlsConfig) -> ssl.SSLContext:
 class ModbusTransport:
     """Asynchronous Modbus client of one bus (see the module docstring)."""
 
-    def __init__(self, bus: BusConfig) -> None:
+    def __init__(self, bus: Endpoint) -> None:
         self.bus = bus
         self.name = bus.name
         self.timeout_s = float(bus.timeout_s)
@@ -113,7 +111,7 @@ class ModbusTransport:
             self._ssl_context = build_ssl_context(bus.tls)
 
     @classmethod
-    def from_bus(cls, bus: BusConfig) -> ModbusTransport:
+    def from_bus(cls, bus: Endpoint) -> ModbusTransport:
         return cls(bus)
 
     # ------------------------------------------------------------------ connection

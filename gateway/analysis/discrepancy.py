@@ -10,7 +10,7 @@ Starting from a baseline model (by default ``tunneling``, the model the paper im
 4. add the best candidate only if it wins clearly (and say so when two candidates cannot be
    told apart, with the measurement that would separate them); repeat until none helps.
 
-The JSON summary keeps the keys and meanings of ``shared/spec/measurement-records.md``.
+The JSON summary keeps the keys and meanings of ``docs/record-format.md``.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..model import EFFECT_NAMES, SensorParams, parse_effects
 from .fitting import FitData, FitResult, Gap, fit_channel, parameters_for
-from .model import EFFECT_NAMES, SensorParams, parse_effects
 from .records import ChannelRecord
 
 FloatArray = NDArray[np.float64]

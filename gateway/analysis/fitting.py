@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from .model import EFFECT_PARAMETERS, ForceStatus, SensorModel, SensorParams, parse_effects
+from ..model import EFFECT_PARAMETERS, ForceStatus, SensorModel, SensorParams, parse_effects
 from .records import ChannelRecord
 
 FloatArray = NDArray[np.float64]

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from .atomic import atomic_write_text
+from ..atomic import atomic_write_text
+from ..model import ConductanceLine, SensorParams, parameter_names
 from .fitting import FitData, FitResult, fit_channel
-from .model import ConductanceLine, SensorParams, parameter_names
 from .records import ChannelRecord
 
 

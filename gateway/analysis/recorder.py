@@ -1,7 +1,7 @@
 """Live measurement records: rows from the gateway's polls, flushed as they come.
 
 Each good poll of a device adds one row per channel to a record in the format of
-``shared/spec/measurement-records.md``: the device clock (``time_s``, from the start of the
+``docs/record-format.md``: the device clock (``time_s``, from the start of the
 recording), the resistance the gateway read (``inf`` for an open contact), and the
 reference force and temperature where the device provides them (a bench's load cell, or
 the simulated array's bench registers). The header is written first and every poll's rows
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from .config import GatewayConfig
-from .pipeline import ChannelStatus, GatewaySnapshot
+from ..config import GatewayConfig
+from ..runtime.snapshot import ChannelStatus, GatewaySnapshot
 
 _WITH_VALUE = {int(ChannelStatus.OK), int(ChannelStatus.NO_CONTACT), int(ChannelStatus.SATURATED)}
 _OPEN = int(ChannelStatus.OPEN)

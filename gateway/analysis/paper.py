@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from .atomic import atomic_write_text
-from .model import ConductanceLine, SensorModel, SensorParams
+from ..atomic import atomic_write_text
+from ..model import ConductanceLine, SensorModel, SensorParams
 from .plots import save_figure
 from .records import ChannelRecord
 

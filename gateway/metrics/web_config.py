@@ -1,0 +1,212 @@
+"""The exporter-toolkit web configuration: TLS and HTTP basic auth of the /metrics server.
+
+A YAML file in the Prometheus exporter-toolkit format (the subset the gateway supports)::
+
+    tls_server_config:
+      cert_file: server.crt        # relative paths are relative to the YAML file
+      key_file: server.key
+      client_ca_file: ca.crt       # optional, with client_auth_type
+      client_auth_type: RequireAndVerifyClientCert
+      min_version: TLS12           # TLS12 (default) or TLS13
+    basic_auth_users:
+      prometheus: $2y$10$...       # bcrypt hash (htpasswd -nBC 10 "" | tr -d ':')
+    http_server_config:
+      headers: {X-Frame-Options: deny}
+
+``load_web_config`` validates it (``ConfigError`` naming the file and key); ``BasicAuth``
+checks an ``Authorization`` header against the bcrypt hashes (a verified pair is cached).
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import hashlib
+import hmac
+import ssl
+import threading
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import bcrypt
+import yaml
+
+from ..errors import ConfigError
+
+_CLIENT_AUTH = {
+    "NoClientCert": ssl.CERT_NONE,
+    "RequestClientCert": ssl.CERT_OPTIONAL,
+    "RequireAnyClientCert": ssl.CERT_REQUIRED,
+    "VerifyClientCertIfGiven": ssl.CERT_OPTIONAL,
+    "RequireAndVerifyClientCert": ssl.CERT_REQUIRED,
+}
+_TLS_VERSIONS = {"TLS12": ssl.TLSVersion.TLSv1_2, "TLS13": ssl.TLSVersion.TLSv1_3}
+
+
+@dataclass(frozen=True)
+class WebConfig:
+    """Exporter-toolkit web configuration (the subset the gateway supports)."""
+
+    cert_file: Path | None = None
+    key_file: Path | None = None
+    client_ca_file: Path | None = None
+    client_auth_type: str = "NoClientCert"
+    min_version: str = "TLS12"
+    basic_auth_users: Mapping[str, bytes] = field(default_factory=dict)
+    headers: Mapping[str, str] = field(default_factory=dict)
+
+    @property
+    def tls(self) -> bool:
+        return self.cert_file is not None
+
+    def ssl_context(self) -> ssl.SSLContext | None:
+        if self.cert_file is None:
+            return None
+        ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+        ctx.minimum_version = _TLS_VERSIONS[self.min_version]
+        ctx.load_cert_chain(str(self.cert_file), str(self.key_file) if self.key_file else None)
+        ctx.verify_mode = _CLIENT_AUTH[self.client_auth_type]
+        if self.client_ca_file is not None:
+            ctx.load_verify_locations(cafile=str(self.client_ca_file))
+        return ctx
+
+
+def _web_error(path: Path, key: str, message: str) -> ConfigError:
+    return ConfigError(f"{path}: {key}: {message}")
+
+
+def _check_keys(path: Path, where: str, table: Mapping[str, Any], allowed: Iterable[str]) -> None:
+    allowed = tuple(allowed)
+    for key in table:
+        if key not in allowed:
+            raise _web_error(
+                path, f"{where}.{key}" if where else str(key), f"unknown key; allowed: {', '.join(allowed)}"
+            )
+
+
+def load_web_config(path: Path) -> WebConfig:
+    """Parse and check a web-config YAML file (``ConfigError`` naming file and key)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read web config: {exc}") from None
+    try:
+        data = yaml.safe_load(text) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: invalid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a mapping at the top level")
+    _check_keys(path, "", data, ("tls_server_config", "basic_auth_users", "http_server_config"))
+    base = path.parent
+
+    def file_key(table: Mapping[str, Any], where: str, key: str) -> Path | None:
+        value = table.get(key)
+        if value is None:
+            return None
+        if not isinstance(value, str) or not value:
+            raise _web_error(path, f"{where}.{key}", "expected a file path")
+        p = Path(value)
+        p = p if p.is_absolute() else base / p
+        if not p.is_file():
+            raise _web_error(path, f"{where}.{key}", f"{p} does not exist")
+        return p
+
+    cert = key = client_ca = None
+    auth_type, min_version = "NoClientCert", "TLS12"
+    tls = data.get("tls_server_config")
+    if tls is not None:
+        if not isinstance(tls, dict):
+            raise _web_error(path, "tls_server_config", "expected a mapping")
+        _check_keys(
+            path,
+            "tls_server_config",
+            tls,
+            ("cert_file", "key_file", "client_ca_file", "client_auth_type", "min_version"),
+        )
+        cert = file_key(tls, "tls_server_config", "cert_file")
+        key = file_key(tls, "tls_server_config", "key_file")
+        client_ca = file_key(tls, "tls_server_config", "client_ca_file")
+        if cert is None or key is None:
+            raise _web_error(path, "tls_server_config", "cert_file and key_file are both required")
+        auth_type = str(tls.get("client_auth_type", "NoClientCert"))
+        if auth_type not in _CLIENT_AUTH:
+            raise _web_error(
+                path,
+                "tls_server_config.client_auth_type",
+                f"{auth_type!r}; allowed: {', '.join(_CLIENT_AUTH)}",
+            )
+        if auth_type == "RequireAndVerifyClientCert" and client_ca is None:
+            raise _web_error(path, "tls_server_config.client_ca_file", f"required with {auth_type}")
+        min_version = str(tls.get("min_version", "TLS12"))
+        if min_version not in _TLS_VERSIONS:
+            raise _web_error(
+                path, "tls_server_config.min_version", f"{min_version!r}; allowed: {', '.join(_TLS_VERSIONS)}"
+            )
+    users: dict[str, bytes] = {}
+    raw_users = data.get("basic_auth_users")
+    if raw_users is not None:
+        if not isinstance(raw_users, dict):
+            raise _web_error(path, "basic_auth_users", "expected a mapping of user: bcrypt hash")
+        for user, hashed in raw_users.items():
+            if not isinstance(hashed, str) or not hashed.startswith(("$2a$", "$2b$", "$2y$")):
+                raise _web_error(
+                    path, f"basic_auth_users.{user}", "expected a bcrypt hash ($2a$/$2b$/$2y$...)"
+                )
+            users[str(user)] = hashed.encode()
+    headers: dict[str, str] = {}
+    http = data.get("http_server_config")
+    if http is not None:
+        if not isinstance(http, dict):
+            raise _web_error(path, "http_server_config", "expected a mapping")
+        _check_keys(path, "http_server_config", http, ("headers",))
+        raw_headers = http.get("headers") or {}
+        if not isinstance(raw_headers, dict):
+            raise _web_error(path, "http_server_config.headers", "expected a mapping")
+        headers = {str(k): str(v) for k, v in raw_headers.items()}
+    config = WebConfig(cert, key, client_ca, auth_type, min_version, users, headers)
+    try:
+        config.ssl_context()
+    except (ssl.SSLError, OSError) as exc:
+        raise _web_error(path, "tls_server_config", f"cannot load the certificate/key: {exc}") from None
+    return config
+
+
+class BasicAuth:
+    """Checks ``Authorization: Basic`` against bcrypt hashes; remembers verified pairs so
+    that a scrape every few seconds does not pay a bcrypt check each time."""
+
+    _DUMMY = bcrypt.hashpw(b"not a password", bcrypt.gensalt(rounds=4))
+
+    def __init__(self, users: Mapping[str, bytes]) -> None:
+        self._users = dict(users)
+        self._verified: set[bytes] = set()
+        self._lock = threading.Lock()
+
+    def check(self, header: str | None) -> bool:
+        if not header or not header.startswith("Basic "):
+            return False
+        try:
+            decoded = base64.b64decode(header[6:].strip(), validate=True).decode("utf-8")
+        except (binascii.Error, UnicodeDecodeError):
+            return False
+        user, sep, password = decoded.partition(":")
+        if not sep:
+            return False
+        hashed = self._users.get(user)
+        key = hashlib.sha256(b"%s\0%s\0%s" % (user.encode(), password.encode(), hashed or b"")).digest()
+        with self._lock:
+            if hashed is not None and any(hmac.compare_digest(key, k) for k in self._verified):
+                return True
+        if hashed is None:
+            bcrypt.checkpw(password.encode(), self._DUMMY)  # same cost for unknown users
+            return False
+        try:
+            ok = bcrypt.checkpw(password.encode(), hashed)
+        except ValueError:
+            return False
+        if ok:
+            with self._lock:
+                self._verified.add(key)
+        return ok

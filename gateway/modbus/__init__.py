@@ -1,0 +1,11 @@
+"""Modbus: the register map, the read plan, register decoding and the pymodbus client.
+
+* ``register_map``: the one module that knows the layout of ``docs/register-map.md``;
+* ``plan``: the coalesced reads of one poll;
+* ``decode``: uint16/uint32/uint64/float32/bitmap codecs with word and byte order;
+* ``image``: the registers a poll returned, decoded into a ``RawSample``;
+* ``client``: ``ModbusTransport``, the only module that imports pymodbus.
+
+This layer knows the physics model's nothing and the runtime's nothing: it turns requests
+into registers and registers into numbers.
+"""

@@ -1,0 +1,127 @@
+"""The register image of one poll and its decoding into a ``RawSample``.
+
+A ``RegisterImage`` holds the blocks of registers a poll's reads returned; ``decode_sample``
+takes from it what the register map (``register_map``) says a device reports: ADC counts or
+float32 resistances (ohm), the open/short/saturated bitmaps, the reference force (N), the
+temperature (degrees C) and the device clock (s). A block that was not read is a
+``DecodeError`` when required and absent (None) when optional.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DecodeError
+from .decode import decode_bitmap, decode_float32, decode_uint16, register_value
+from .register_map import DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS, STATUS_BITMAP_STRIDE, DeviceLayout
+
+__all__ = ["ImageBlock", "RawSample", "RegisterImage", "RegisterKind", "decode_sample"]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+RegisterKind = Literal["input", "holding"]
+
+
+@dataclass(frozen=True)
+class ImageBlock:
+    """Registers read by one request: ``values[k]`` is the register at ``address + k``."""
+
+    kind: RegisterKind
+    address: int
+    values: NDArray[np.uint16]
+
+    def covers(self, kind: str, address: int, count: int) -> bool:
+        return (
+            kind == self.kind
+            and self.address <= address
+            and address + count <= self.address + len(self.values)
+        )
+
+
+@dataclass(frozen=True)
+class RegisterImage:
+    """The registers one poll read, as blocks (the coalesced reads of the read plan)."""
+
+    blocks: tuple[ImageBlock, ...] = ()
+
+    @classmethod
+    def from_reads(
+        cls, reads: Iterable[tuple[RegisterKind, int, Sequence[int] | NDArray[np.uint16]]]
+    ) -> RegisterImage:
+        blocks = []
+        for kind, address, values in reads:
+            arr = np.array(values, dtype=np.uint16)  # always a copy: the image owns it
+            arr.setflags(write=False)
+            blocks.append(ImageBlock(kind, int(address), arr))
+        return cls(tuple(blocks))
+
+    def get(self, kind: RegisterKind, address: int, count: int) -> NDArray[np.uint16] | None:
+        """The registers ``address .. address + count - 1`` or None when not read."""
+        for b in self.blocks:
+            if b.covers(kind, address, count):
+                start = address - b.address
+                return b.values[start : start + count]
+        return None
+
+    def require(self, kind: RegisterKind, address: int, count: int, what: str) -> NDArray[np.uint16]:
+        regs = self.get(kind, address, count)
+        if regs is None:
+            raise DecodeError(f"{what}: {kind} registers {address}..{address + count - 1} were not read")
+        return regs
+
+
+@dataclass(frozen=True)
+class RawSample:
+    """One poll's measurements of all N device channels, decoded but not yet converted."""
+
+    counts: NDArray[np.integer[Any]] | None = None  # ADC counts (encoding "adc"), uint16 from registers
+    resistance_ohm: FloatArray | None = None  # ohm (encoding "float32")
+    open_bits: BoolArray | None = None
+    short_bits: BoolArray | None = None
+    saturated_bits: BoolArray | None = None
+    temperature_c: FloatArray | None = None
+    reference_force_n: FloatArray | None = None
+    device_time_s: float | None = None
+
+
+def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
+    """Decode the registers of one poll of ``device`` (``DecodeError`` if any are missing)."""
+    regs = device.registers
+    n = device.n_channels
+    wo, bo = regs.word_order, regs.byte_order
+    counts = resistance = None
+    if device.encoding == "adc":
+        counts = decode_uint16(image.require("input", regs.adc_address, n, "ADC counts"), bo)
+    elif device.encoding == "float32":
+        raw = image.require("input", regs.float_address, 2 * n, "float32 resistances")
+        resistance = decode_float32(raw, wo, bo)
+    else:
+        raise DecodeError(f"unknown encoding {device.encoding!r}")
+    bitmaps: list[BoolArray | None] = [None, None, None]
+    if regs.status_address is not None:
+        n_regs = -(-n // 16)
+        for k in range(3):
+            words = image.get("input", regs.status_address + k * STATUS_BITMAP_STRIDE, n_regs)
+            if words is not None:
+                bitmaps[k] = decode_bitmap(words, n, bo)
+    temperature = reference = None
+    if regs.temperature_address is not None:
+        words = image.get("input", regs.temperature_address, 2 * n)
+        if words is not None:
+            temperature = decode_float32(words, wo, bo)
+    if regs.force_reference_address is not None:
+        words = image.get("input", regs.force_reference_address, 2 * n)
+        if words is not None:
+            reference = decode_float32(words, wo, bo)
+    device_time = None
+    words = image.get("input", DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS)
+    if words is not None:
+        device_time = register_value(words.tolist(), wo, bo) / 1000.0
+    return RawSample(
+        counts, resistance, bitmaps[0], bitmaps[1], bitmaps[2], temperature, reference, device_time
+    )

@@ -1,0 +1,172 @@
+"""The read plan: the Modbus requests one poll of a device makes.
+
+``read_plan`` coalesces the register blocks of ``register_map.register_blocks`` into the
+fewest requests a bus allows (at most ``MODBUS_MAX_READ`` registers each, never splitting a
+float32); ``device_plan`` adds the device clock. ``block_registers`` reassembles a block from
+the answers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+from .register_map import (
+    DEVICE_TIME_ADDRESS,
+    DEVICE_TIME_REGISTERS,
+    DeviceLayout,
+    RegisterBlock,
+    register_blocks,
+)
+
+__all__ = [
+    "MAX_GAP_REGISTERS",
+    "MERGE_GAP",
+    "MODBUS_MAX_READ",
+    "ReadRequest",
+    "block_registers",
+    "device_plan",
+    "plan_with_device_time",
+    "read_plan",
+]
+
+#: Two register ranges at most this many registers apart are read in one request.
+MAX_GAP_REGISTERS: Final = 8
+#: Modbus allows at most 125 registers in one read (function codes 3 and 4).
+MODBUS_MAX_READ: Final = 125
+
+
+@dataclass(frozen=True)
+class ReadRequest:
+    """One Modbus read of a poll: ``count`` registers from ``address``.
+
+    ``kind`` is ``"input"`` (function 4) or ``"holding"`` (function 3); ``purpose`` names the
+    register blocks it covers, in address order, e.g. ``("status", "adc")``.
+    """
+
+    kind: str
+    address: int
+    count: int
+    purpose: tuple[str, ...]
+
+    @property
+    def end(self) -> int:
+        """The last address read (inclusive)."""
+        return self.address + self.count - 1
+
+
+def read_plan(
+    device: DeviceLayout, max_read_registers: int, max_gap: int = MAX_GAP_REGISTERS
+) -> tuple[ReadRequest, ...]:
+    """The reads of one poll of ``device``, coalesced into the fewest requests.
+
+    Register ranges of the same kind that touch or lie at most ``max_gap`` registers apart are
+    read together (the gap registers are read and ignored); no request is longer than
+    ``max_read_registers``, and a float32 value is never split across two requests. Raises
+    ``ValueError`` if ``max_read_registers`` cannot hold one value.
+    """
+    if not 1 <= max_read_registers <= MODBUS_MAX_READ:
+        raise ValueError(f"max_read_registers = {max_read_registers} is outside 1..{MODBUS_MAX_READ}")
+    if max_gap < 0:
+        raise ValueError(f"max_gap = {max_gap} must be >= 0")
+    blocks = register_blocks(device)
+    widest = max(b.value_registers for b in blocks)
+    if widest > max_read_registers:
+        raise ValueError(
+            f"max_read_registers = {max_read_registers} cannot hold a float32 value (2 registers, "
+            f"never split across reads); allowed: 2..{MODBUS_MAX_READ}"
+        )
+    requests: list[ReadRequest] = []
+    for kind in ("holding", "input"):
+        # Every value of every block as (start, registers, purpose), in address order.
+        units = sorted(
+            (b.address + k * b.value_registers, b.value_registers, b.purpose)
+            for b in blocks
+            if b.kind == kind
+            for k in range(b.count // b.value_registers)
+        )
+        start = end = -1
+        purposes: list[str] = []
+        for unit_start, width, purpose in units:
+            unit_end = unit_start + width - 1
+            if (
+                start >= 0
+                and unit_start - end - 1 <= max_gap
+                and max(end, unit_end) - start < max_read_registers
+            ):
+                end = max(end, unit_end)
+                if purpose not in purposes:
+                    purposes.append(purpose)
+                continue
+            if start >= 0:
+                requests.append(ReadRequest(kind, start, end - start + 1, tuple(purposes)))
+            start, end, purposes = unit_start, unit_end, [purpose]
+        if start >= 0:
+            requests.append(ReadRequest(kind, start, end - start + 1, tuple(purposes)))
+    return tuple(requests)
+
+
+def block_registers(
+    block: RegisterBlock, responses: Iterable[tuple[ReadRequest, Sequence[int]]]
+) -> list[int]:
+    """Assemble the registers of ``block`` from the answers to a read plan.
+
+    ``responses`` pairs each request with the registers it returned. Raises ``ValueError`` if
+    the answers do not cover the whole block.
+    """
+    out: list[int | None] = [None] * block.count
+    for request, registers in responses:
+        if request.kind != block.kind:
+            continue
+        if len(registers) != request.count:
+            raise ValueError(
+                f"read of {request.count} registers at {request.address} returned {len(registers)} registers"
+            )
+        low = max(block.address, request.address)
+        high = min(block.end, request.end)
+        for address in range(low, high + 1):
+            out[address - block.address] = registers[address - request.address]
+    missing = [block.address + i for i, v in enumerate(out) if v is None]
+    if missing:
+        raise ValueError(f"block {block.name} misses register {missing[0]} in the responses")
+    return [v for v in out if v is not None]
+
+
+# ------------------------------------------------------------------ the reads of one poll
+#: Reads merge across gaps of at most this many registers. The three status bitmaps are 16
+#: registers apart and every register between them exists (docs/register-map.md), so the
+#: bitmaps of any channel count come in one request. Registers in a wider gap may not exist
+#: (a device answers exception 2), so nothing wider is merged; a device that refuses a
+#: merged read anyway falls back to unmerged reads.
+MERGE_GAP = 15
+
+
+def plan_with_device_time(plan: tuple[ReadRequest, ...], max_read_registers: int) -> tuple[ReadRequest, ...]:
+    """Add the device clock (input registers 2-5, uint64 ms) to a read plan.
+
+    The clock makes the creep time steps right whatever the poll timing (and with a
+    simulator running faster than real time). It joins an input read that touches it,
+    else it is one more request (registers 7-15 do not exist, so it cannot ride on the
+    status read). A device without the clock answers exception 2 and the poller falls
+    back to the plan without it (host clock).
+    """
+    lo, hi = DEVICE_TIME_ADDRESS, DEVICE_TIME_ADDRESS + DEVICE_TIME_REGISTERS - 1
+    inputs = [r for r in plan if r.kind == "input"]
+    if any(r.address <= lo and r.end >= hi for r in inputs):
+        return plan
+    for r in inputs:
+        start, end = min(r.address, lo), max(r.end, hi)
+        if r.address <= hi + 1 and r.end >= lo - 1 and end - start + 1 <= max_read_registers:
+            merged = ReadRequest("input", start, end - start + 1, ("device_time", *r.purpose))
+            return tuple(merged if q is r else q for q in plan)
+    return (ReadRequest("input", lo, DEVICE_TIME_REGISTERS, ("device_time",)), *plan)
+
+
+def device_plan(
+    device: DeviceLayout, max_read_registers: int, merge_gap: int, clock: bool
+) -> tuple[ReadRequest, ...]:
+    """The reads of one poll: the configuration's ``read_plan`` (coalesced across gaps of
+    ``merge_gap`` registers) plus the device clock when ``clock``."""
+    plan = tuple(read_plan(device, max_read_registers, max_gap=merge_gap))
+    return plan_with_device_time(plan, max_read_registers) if clock else plan

@@ -1,0 +1,228 @@
+"""Snapshots: the immutable result of the polls, as the exporter and recorders see it.
+
+A ``DeviceSnapshot`` is the converted last poll of one device: per enabled channel its
+resistance (ohm), drift-corrected force (N), status (``ChannelStatus``) and position (mm),
+plus the array quantities (total force N, centre of pressure mm, contact area mm^2, peak
+channel). A ``GatewaySnapshot`` holds every device's snapshot and counters. Arrays are
+read-only; a value that is not a valid number is NaN, flagged by the status, and never
+reaches the metrics (``DeviceSnapshot.channels`` gives None instead).
+"""
+
+from __future__ import annotations
+
+import enum
+import functools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..model import SensorModel
+from .counters import DeviceCounters
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+StatusArray = NDArray[np.int8]
+
+
+class ChannelStatus(enum.IntEnum):
+    """What one channel's value means in this snapshot."""
+
+    OK = 0  # a force inside the model's range
+    NO_CONTACT = 1  # resistance at or above R(force_min): reads 0 N
+    SATURATED = 2  # at or beyond force_max (model) or ADC at a rail (device bitmap)
+    OPEN = 3  # open circuit (ADC 0 counts, +inf ohm, or the device's open bitmap)
+    SHORT = 4  # short circuit (ADC full scale, 0 ohm, or the device's short bitmap)
+    STALE = 5  # the device did not answer this poll: values are the last ones
+    ERROR = 6  # an invalid value (NaN, negative, out of range): no value
+
+    @property
+    def label(self) -> str:
+        return self.name.lower()
+
+
+STATUS_LABELS: tuple[str, ...] = tuple(s.label for s in ChannelStatus)
+
+
+_G = TypeVar("_G", bound=np.generic)
+
+
+def read_only(a: NDArray[_G]) -> NDArray[_G]:
+    """Mark a freshly built array (no other reference to it) read-only, without a copy."""
+    a.setflags(write=False)
+    return a
+
+
+def frozen_copy(a: NDArray[_G]) -> NDArray[_G]:
+    """A read-only copy of ``a``."""
+    out: NDArray[_G] = np.array(a, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+#: Statuses whose channel carries a force (N) / counts as in contact.
+_STATUS_CODES = np.arange(len(ChannelStatus))
+VALUED = frozen_copy(
+    np.isin(
+        _STATUS_CODES, [int(ChannelStatus.OK), int(ChannelStatus.NO_CONTACT), int(ChannelStatus.SATURATED)]
+    )
+)
+IN_CONTACT = frozen_copy(np.isin(_STATUS_CODES, [int(ChannelStatus.OK), int(ChannelStatus.SATURATED)]))
+
+
+@dataclass(frozen=True)
+class ChannelView:
+    """One channel of a snapshot, with absent values as None (never NaN or inf)."""
+
+    index: int
+    name: str
+    x_mm: float
+    y_mm: float
+    status: ChannelStatus
+    resistance_ohm: float | None
+    force_n: float | None
+    force_static_n: float | None
+    reference_force_n: float | None
+
+
+def _opt(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+@dataclass(frozen=True, eq=False)
+class StaticEstimate:
+    """The inputs of a snapshot's static inversion (``SensorModel.invert_static``)."""
+
+    groups: tuple[tuple[NDArray[np.intp], SensorModel], ...]
+    resistance_ohm: FloatArray  # as given to the model: NaN where the channel had no value
+    temperature_c: FloatArray | None  # per snapshot channel, or None
+    valued: BoolArray  # channels whose status carries a force
+
+    def evaluate(self) -> FloatArray:
+        out = np.full(len(self.resistance_ohm), np.nan)
+        for idx, model in self.groups:
+            temp = None
+            if self.temperature_c is not None and model.has("temperature"):
+                temp = self.temperature_c[idx]
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                out[idx] = model.invert_static(self.resistance_ohm[idx], temp).force_n
+        return read_only(np.where(self.valued & np.isfinite(out), out, np.nan))
+
+
+@dataclass(frozen=True, eq=False)
+class DeviceSnapshot:
+    """The converted result of the last poll of one device (immutable).
+
+    Arrays have one entry per enabled channel (``channel_index`` holds the device index);
+    NaN marks an absent value (see ``status``). Forces in N, resistances in ohm, positions
+    and centre of pressure in mm, contact area in mm^2, times in s.
+    """
+
+    device: str
+    bus: str
+    channel_index: IntArray
+    channel_names: tuple[str, ...]
+    x_mm: FloatArray
+    y_mm: FloatArray
+    resistance_ohm: FloatArray
+    force_n: FloatArray
+    static_estimate: StaticEstimate | None  # see ``force_static_n``
+    reference_force_n: FloatArray
+    status: StatusArray
+    up: bool
+    timestamp_s: float  # wall clock of this poll (Unix time)
+    last_success_timestamp_s: float | None  # wall clock of the last good poll
+    device_time_s: float | None  # device clock at the last good poll
+    poll_interval_s: float
+    total_force_n: float = 0.0
+    center_of_pressure_mm: tuple[float, float] | None = None
+    channels_in_contact: int = 0
+    contact_area_mm2: float = 0.0
+    peak_channel: str | None = None
+    peak_force_n: float | None = None
+    error: str | None = None  # why the last poll failed
+    temperature_c: FloatArray | None = None  # sensor temperature where the device reports it, degC
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.channel_names)
+
+    @functools.cached_property
+    def force_static_n(self) -> FloatArray:
+        """Force by static inversion (no creep state), N; NaN where absent. A diagnostic,
+        so it is computed on first use (e.g. a scrape), not at every poll."""
+        if self.static_estimate is None:
+            return read_only(np.full(self.n_channels, np.nan))
+        return self.static_estimate.evaluate()
+
+    def channels(self) -> list[ChannelView]:
+        return [
+            ChannelView(
+                index=int(self.channel_index[k]),
+                name=self.channel_names[k],
+                x_mm=float(self.x_mm[k]),
+                y_mm=float(self.y_mm[k]),
+                status=ChannelStatus(int(self.status[k])),
+                resistance_ohm=_opt(float(self.resistance_ohm[k])),
+                force_n=_opt(float(self.force_n[k])),
+                force_static_n=_opt(float(self.force_static_n[k])),
+                reference_force_n=_opt(float(self.reference_force_n[k])),
+            )
+            for k in range(self.n_channels)
+        ]
+
+    def status_counts(self) -> dict[str, int]:
+        counts = np.bincount(self.status.astype(np.int64), minlength=len(ChannelStatus))
+        return {s.label: int(counts[s]) for s in ChannelStatus}
+
+
+@dataclass(frozen=True)
+class ArrayQuantities:
+    """Whole-array quantities over the channels in contact (status ok or saturated, F > 0)."""
+
+    total_force_n: float
+    center_of_pressure_mm: tuple[float, float] | None
+    channels_in_contact: int
+    contact_area_mm2: float
+    peak_index: int | None  # position in the snapshot arrays
+    peak_force_n: float | None
+
+
+def array_quantities(
+    force_n: FloatArray, status: StatusArray, x_mm: FloatArray, y_mm: FloatArray, pitch_mm: float
+) -> ArrayQuantities:
+    """Total force (N), centre of pressure (mm), contact area (mm^2) and peak channel.
+
+    The centre of pressure is sum(F_i x_i) / sum(F_i) over channels in contact; it is None
+    (not NaN) when nothing is in contact. Contact area = channels in contact x pitch^2.
+    """
+    f = np.asarray(force_n, dtype=np.float64)
+    contact = IN_CONTACT[np.asarray(status)] & (f > 0.0)  # NaN is never > 0
+    n = int(np.count_nonzero(contact))
+    if n == 0:
+        return ArrayQuantities(0.0, None, 0, 0.0, None, None)
+    fc = np.where(contact, f, 0.0)
+    total = float(fc.sum())
+    cop = (float(np.dot(fc, x_mm)) / total, float(np.dot(fc, y_mm)) / total)
+    peak = int(fc.argmax())  # forces in contact are > 0, the rest 0
+    return ArrayQuantities(total, cop, n, float(n * pitch_mm * pitch_mm), peak, float(f[peak]))
+
+
+@dataclass(frozen=True)
+class GatewaySnapshot:
+    """Everything the exporter shows: the last snapshot and counters of every device."""
+
+    devices: Mapping[str, DeviceSnapshot] = field(default_factory=lambda: MappingProxyType({}))
+    counters: Mapping[str, DeviceCounters] = field(default_factory=lambda: MappingProxyType({}))
+    sequence: int = 0
+
+    @classmethod
+    def build(
+        cls, devices: Mapping[str, DeviceSnapshot], counters: Mapping[str, DeviceCounters], sequence: int
+    ) -> GatewaySnapshot:
+        return cls(MappingProxyType(dict(devices)), MappingProxyType(dict(counters)), sequence)
