@@ -25,7 +25,7 @@ from gateway.modbus.plan import ReadRequest, block_registers, read_plan
 from gateway.modbus.register_map import register_blocks
 from gateway.model import PAPER_EFFECTS, Divider, SensorParams
 
-REPO = Path(__file__).resolve().parents[3]
+REPO = Path(__file__).resolve().parents[4]
 SOURCE = Path("/cfg/gateway.toml")
 
 BASE = """\
