@@ -19,6 +19,7 @@ from typing import TextIO
 
 from ..config import GatewayConfig
 from ..runtime.snapshot import ChannelStatus, GatewaySnapshot
+from .records import RecordWriter
 
 _WITH_VALUE = {int(ChannelStatus.OK), int(ChannelStatus.NO_CONTACT), int(ChannelStatus.SATURATED)}
 _OPEN = int(ChannelStatus.OPEN)
@@ -57,13 +58,8 @@ class LiveRecorder:
         self._last: dict[str, float] = {}
         self._t0: dict[str, float] = {}
         self._errors: dict[str, int] = {}
-        for key, value in (metadata or {}).items():
-            out.write(f"# {key}: {value}\n")
-        cols = ["time_s", "channel", "resistance_ohm"]
-        cols += ["force_n"] if self._has_force else []
-        cols += ["temperature_c"] if self._has_temp else []
-        out.write(",".join(cols) + "\n")
-        out.flush()
+        self._writer = RecordWriter(out, metadata, has_force=self._has_force, has_temperature=self._has_temp)
+        self._writer.flush()
 
     def label(self, device: str, channel: str) -> str:
         return f"{device}/{channel}" if self._multi else channel
@@ -76,7 +72,7 @@ class LiveRecorder:
             self._take(snapshot)
 
     def _take(self, snapshot: GatewaySnapshot) -> None:
-        lines: list[str] = []
+        rows = 0
         for name, counters in snapshot.counters.items():
             if self._device is not None and name != self._device:
                 continue
@@ -104,22 +100,20 @@ class LiveRecorder:
                 elif status not in _WITH_VALUE or not (math.isfinite(r) and r > 0.0):
                     self.stats.skipped_rows += 1
                     continue
-                fields = [f"{clock - t0:.6f}", self.label(name, channel), "inf" if math.isinf(r) else repr(r)]
-                if self._has_force:
-                    f = float(dev.reference_force_n[k])
-                    fields.append(repr(max(f, 0.0)) if math.isfinite(f) else "")
-                if self._has_temp:
-                    temps = dev.temperature_c
-                    t = float(temps[k]) if temps is not None else math.nan
-                    fields.append(repr(t) if math.isfinite(t) else "")
-                if "" in fields:
+                force = max(float(dev.reference_force_n[k]), 0.0) if self._has_force else None
+                temps = dev.temperature_c
+                temp = (float(temps[k]) if temps is not None else math.nan) if self._has_temp else None
+                if (force is not None and not math.isfinite(force)) or (
+                    temp is not None and not math.isfinite(temp)
+                ):
                     self.stats.skipped_rows += 1
                     continue
-                lines.append(",".join(fields))
-        if lines:
-            self.out.write("\n".join(lines) + "\n")
-            self.out.flush()
-            self.stats.rows += len(lines)
+                # microsecond resolution: the device clock counts milliseconds
+                self._writer.row(round(clock - t0, 6), self.label(name, channel), r, force, temp)
+                rows += 1
+        if rows:
+            self._writer.flush()
+            self.stats.rows += rows
 
 
 def record_path_ok(path: Path) -> None:

@@ -17,6 +17,7 @@ import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -223,6 +224,58 @@ def _number(text: str, where: str, line: int, col: int, name: str) -> float:
     return value
 
 
+class RecordWriter:
+    """The one writer of the record format: ``# key: value`` metadata, the header, then one
+    row per sample per channel (long format), each value as the shortest text that reads
+    back as the same double (``inf`` for an open circuit).
+
+    ``has_force`` / ``has_temperature`` add the ``force_n`` (N) / ``temperature_c`` (degC)
+    columns. ``row`` writes one row; ``flush`` passes the rows to the file, so a recording
+    that is interrupted is a valid record of what was written before.
+    """
+
+    def __init__(
+        self,
+        out: TextIO,
+        metadata: Mapping[str, str] | None = None,
+        *,
+        has_force: bool = False,
+        has_temperature: bool = False,
+    ) -> None:
+        self.out = out
+        self.has_force = has_force
+        self.has_temperature = has_temperature
+        for key, value in (metadata or {}).items():
+            out.write(f"# {key}: {value}\n")
+        cols = ["time_s", "channel", "resistance_ohm"]
+        cols += ["force_n"] if has_force else []
+        cols += ["temperature_c"] if has_temperature else []
+        out.write(",".join(cols) + "\n")
+
+    def row(
+        self,
+        time_s: float,
+        channel: str,
+        resistance_ohm: float,
+        force_n: float | None = None,
+        temperature_c: float | None = None,
+    ) -> None:
+        """One sample of one channel; ``force_n`` / ``temperature_c`` when the record has them."""
+        fields = [_fmt(time_s), channel, _fmt(resistance_ohm)]
+        if self.has_force:
+            if force_n is None:
+                raise ValueError("this record has a force_n column: give force_n")
+            fields.append(_fmt(force_n))
+        if self.has_temperature:
+            if temperature_c is None:
+                raise ValueError("this record has a temperature_c column: give temperature_c")
+            fields.append(_fmt(temperature_c))
+        self.out.write(",".join(fields) + "\n")
+
+    def flush(self) -> None:
+        self.out.flush()
+
+
 def format_record(
     metadata: Mapping[str, str],
     channels: Sequence[str],
@@ -233,26 +286,22 @@ def format_record(
 ) -> str:
     """Record text in long format from per-sample rows of per-channel values."""
     out = io.StringIO()
-    for key, value in metadata.items():
-        out.write(f"# {key}: {value}\n")
-    cols = ["time_s", "channel", "resistance_ohm"]
-    if force_n is not None:
-        cols.append("force_n")
-    if temperature_c is not None:
-        cols.append("temperature_c")
-    out.write(",".join(cols) + "\n")
+    writer = RecordWriter(
+        out, metadata, has_force=force_n is not None, has_temperature=temperature_c is not None
+    )
     forces = iter(force_n) if force_n is not None else None
     temps = iter(temperature_c) if temperature_c is not None else None
     for t, rs in zip(time_s, resistance_ohm, strict=True):
         fs = next(forces) if forces is not None else None
         ts = next(temps) if temps is not None else None
         for i, name in enumerate(channels):
-            fields = [repr(float(t)), name, _fmt(rs[i])]
-            if fs is not None:
-                fields.append(_fmt(fs[i]))
-            if ts is not None:
-                fields.append(_fmt(ts[i]))
-            out.write(",".join(fields) + "\n")
+            writer.row(
+                float(t),
+                name,
+                float(rs[i]),
+                None if fs is None else float(fs[i]),
+                None if ts is None else float(ts[i]),
+            )
     return out.getvalue()
 
 

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import io
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from gateway.analysis.records import format_record, parse_record, read_record, write_record
+from gateway.analysis.records import RecordWriter, format_record, parse_record, read_record, write_record
 from gateway.errors import RecordError
 
 GOOD = """# sensor: linqstat-7
@@ -125,3 +128,44 @@ def test_write_then_read_round_trip(tmp_path: Path) -> None:
     assert math.isinf(rec.channel("c1").resistance_ohm[0])
     np.testing.assert_array_equal(rec.channel("c1").force_n, [0.0, 2.0])
     assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]
+
+
+def test_the_writer_writes_the_spec_header_and_exact_values() -> None:
+    out = io.StringIO()
+    writer = RecordWriter(out, {"sensor": "tip"}, has_force=True)
+    writer.row(0.25, "tip", 1234.5, 2.0)
+    writer.row(0.5, "tip", math.inf, 0.0)
+    assert (
+        out.getvalue()
+        == "# sensor: tip\ntime_s,channel,resistance_ohm,force_n\n0.25,tip,1234.5,2.0\n0.5,tip,inf,0.0\n"
+    )
+    with pytest.raises(ValueError, match="force_n"):
+        writer.row(0.75, "tip", 1.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.floats(min_value=0.0, max_value=1e6),
+            st.one_of(st.floats(min_value=1e-3, max_value=1e12), st.just(math.inf)),
+            st.floats(min_value=0.0, max_value=1e3),
+            st.floats(min_value=-50.0, max_value=150.0),
+        ),
+        min_size=1,
+        max_size=20,
+    )
+)
+def test_every_written_value_reads_back_as_the_same_double(
+    rows: list[tuple[float, float, float, float]],
+) -> None:
+    rows = sorted(rows)  # time is non-decreasing within a channel
+    out = io.StringIO()
+    writer = RecordWriter(out, has_force=True, has_temperature=True)
+    for t, r, f, temp in rows:
+        writer.row(t, "a", r, f, temp)
+    record = parse_record(out.getvalue()).channel("a")
+    assert record.time_s.tolist() == [row[0] for row in rows]
+    assert record.resistance_ohm.tolist() == [row[1] for row in rows]
+    assert record.force_n is not None and record.force_n.tolist() == [row[2] for row in rows]
+    assert record.temperature_c is not None and record.temperature_c.tolist() == [row[3] for row in rows]

@@ -416,23 +416,34 @@ def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
         assert max(delays) > 0.6 * cap  # full jitter spreads over the whole range
 
 
-@pytest.mark.parametrize("bits", [10, 12, 16])
-def test_register_lookup_tables_equal_eq_18(bits: int) -> None:
-    """Counts read from registers (uint16) are converted by lookup; every one of the 65536
-    register values must give what eq. 18 gives, values above full scale invalid."""
+@pytest.mark.parametrize(
+    ("bits", "hand"),
+    [
+        # r = R_ref (full_scale / counts - 1), R_ref = 4.7 kohm, worked by hand
+        (10, {1: 4.7e3 * 1022, 512: 4.7e3 * 511 / 512, 1022: 4.7e3 / 1022}),
+        (12, {1: 4.7e3 * 4094, 2048: 4.7e3 * 2047 / 2048, 4094: 4.7e3 / 4094}),
+        (16, {1: 4.7e3 * 65534, 32768: 4.7e3 * 32767 / 32768, 65534: 4.7e3 / 65534}),
+    ],
+)
+def test_register_lookup_tables_give_eq_18_by_hand(bits: int, hand: dict[int, float]) -> None:
+    """Counts read from registers (uint16) are converted by lookup: the rails, a few counts
+    worked by hand, register values above full scale invalid, and r falling with counts."""
     from gateway.runtime.processor import _adc_tables
 
-    divider = Divider(5.0, 4.7e3, bits)
-    tables = _adc_tables(divider)
-    r, status = divider.resistance(np.arange(0x10000, dtype=np.int64))
-    np.testing.assert_array_equal(tables.status, status)
-    np.testing.assert_array_equal(tables.model_ohm, r)  # NaN, inf and 0 in the same places
-    assert tables.report_ohm[0] != tables.report_ohm[0]  # open: no value to report
+    full_scale = 2**bits - 1
+    tables = _adc_tables(Divider(5.0, 4.7e3, bits))
+    for counts, r_ohm in hand.items():
+        assert tables.model_ohm[counts] == pytest.approx(r_ohm, rel=1e-12)
+        assert tables.report_ohm[counts] == pytest.approx(r_ohm, rel=1e-12)
+        assert tables.status[counts] == 0  # DividerStatus.OK
+    assert tables.model_ohm[0] == np.inf and np.isnan(tables.report_ohm[0]) and tables.status[0] == 1  # open
+    assert tables.model_ohm[full_scale] == 0.0 and tables.status[full_scale] == 2  # short
     assert tables.model_with_bitmaps_ohm[0] == np.finfo(np.float64).max
-    assert tables.model_with_bitmaps_ohm[divider.full_scale] == np.finfo(np.float64).tiny
-    beyond = status[divider.full_scale + 1 :]
-    assert beyond.size == 0x10000 - 2**bits and (beyond == 3).all()  # DividerStatus.INVALID
-    assert r[1] == pytest.approx(4.7e3 * (divider.full_scale - 1))
+    assert tables.model_with_bitmaps_ohm[full_scale] == np.finfo(np.float64).tiny
+    beyond = slice(full_scale + 1, None)
+    assert (tables.status[beyond] == 3).all() and np.isnan(tables.model_ohm[beyond]).all()  # INVALID
+    assert tables.status[beyond].size == 0x10000 - 2**bits
+    assert (np.diff(tables.model_ohm[1:full_scale]) < 0.0).all()
 
 
 @pytest.mark.parametrize("bitmaps", [False, True])
