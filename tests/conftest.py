@@ -1,0 +1,79 @@
+"""The one fixture every test runs under: it fails a test that leaks a thread, a child
+process or an asyncio task.
+
+A thread or process a test started must be gone when the test ends (given a short grace for
+those already told to stop); a task still pending when an async test returns was never
+awaited or cancelled. Each leak is named in the failure.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import threading
+import time
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+
+import pytest
+import pytest_asyncio
+
+#: How long a thread or process that is shutting down may take to be gone (s).
+GRACE_S = 5.0
+
+
+def _children() -> set[int]:
+    """Live child processes of this process (zombies not yet reaped count as live)."""
+    found: set[int] = set()
+    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
+        try:
+            found.update(int(pid) for pid in (task / "children").read_text().split())
+        except OSError:
+            continue
+    return found
+
+
+def _threads() -> set[threading.Thread]:
+    return {t for t in threading.enumerate() if t.is_alive()}
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_threads_or_processes() -> Iterator[None]:
+    threads_before, children_before = _threads(), _children()
+    yield
+    deadline = time.monotonic() + GRACE_S
+    while True:
+        threads = _threads() - threads_before
+        children = _children() - children_before
+        if not (threads or children) or time.monotonic() > deadline:
+            break
+        time.sleep(0.02)
+    leaks = [f"thread {t.name!r} (daemon={t.daemon})" for t in threads]
+    leaks += [f"child process {pid}: {_cmdline(pid)}" for pid in sorted(children)]
+    if leaks:
+        pytest.fail("the test leaked: " + "; ".join(leaks), pytrace=False)
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace").strip()
+    except OSError:
+        return "?"
+
+
+@pytest_asyncio.fixture(autouse=True)
+async def no_leaked_tasks(no_leaked_threads_or_processes: None) -> AsyncIterator[None]:
+    """Runs inside the thread and process check, so that check comes last."""
+    before = asyncio.all_tasks()
+    yield
+    current = asyncio.current_task()
+    leaked = [t for t in asyncio.all_tasks() - before if t is not current and not t.done()]
+    for task in leaked:
+        task.cancel()
+    # the loop's own executor threads (asyncio.to_thread) end with the loop, here rather than
+    # at the runner's teardown, which comes after the thread check
+    await asyncio.get_running_loop().shutdown_default_executor()
+    if leaked:
+        pytest.fail(
+            "the test leaked asyncio tasks: " + ", ".join(repr(t.get_coro()) for t in leaked), pytrace=False
+        )
