@@ -32,6 +32,7 @@ from pathlib import Path
 
 from pymodbus.client import AsyncModbusTcpClient
 
+from gateway.cli.simulated import gateway_params
 from gateway.config import BusConfig, DeviceConfig, bus_config_for, device_config_for, gateway_config_for
 from gateway.modbus.image import RegisterImage, RegisterKind, decode_sample
 from gateway.modbus.plan import ReadRequest
@@ -59,7 +60,7 @@ def _device_of(array: SimArray, name: str = "bench") -> DeviceConfig:
     return device_config_for(
         name,
         1,
-        array.channel_params,
+        gateway_params(array.channel_params),
         cfg.columns,
         cfg.pitch_mm,
         divider=Divider(cfg.supply_v, cfg.reference_ohm, cfg.adc_bits),

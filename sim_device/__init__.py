@@ -1,8 +1,12 @@
 """A simulated MIS tactile array: piezoresistive sensors (Kalantari et al.) behind Modbus.
 
-Physics from ``gateway.model`` (tunneling, contact, creep) plus switchable world effects,
-a divider and noisy ADC per channel (eq. 18), scripted loads (``scenarios``), ground-truth
-records, fault injection, and Modbus TCP / RTU / RTU-over-TCP / TLS servers.
+An independent witness of the gateway: it imports nothing of ``gateway``. Its physics
+(``sensor``: tunneling, contact, creep integrated by Runge-Kutta) and read-out
+(``electronics``: divider and noisy ADC, eq. 18) are written again from the paper and
+``docs/parameters.md``; ``world`` adds switchable effects beyond the paper. Scripted loads
+(``scenarios``), ground-truth records, fault injection, and Modbus TCP / RTU / RTU-over-TCP
+/ TLS servers. What it shares with the gateway are documents: the register map and the
+record format.
 
 The register map is ``docs/register-map.md``; scenarios are described in
 ``docs/scenarios.md``.
@@ -25,6 +29,7 @@ from .scenarios import (
     UniformLoad,
     builtin_scenarios,
 )
+from .sensor import PaperSensor, SensorParamsError, SimSensorParams
 
 __all__ = [
     "DEFAULT_SPREAD",
@@ -38,6 +43,7 @@ __all__ = [
     "FaultInjector",
     "Indentation",
     "LineTiming",
+    "PaperSensor",
     "Profile",
     "ProfileBuilder",
     "Record",
@@ -45,8 +51,10 @@ __all__ = [
     "SampleBatch",
     "Scenario",
     "ScenarioError",
+    "SensorParamsError",
     "ServerStartError",
     "SimArray",
+    "SimSensorParams",
     "SimServer",
     "TemperatureProgram",
     "UniformLoad",

@@ -2,16 +2,17 @@
 
 Physics per channel (SI units)
 ------------------------------
-The paper's sensor, ``SensorModel(("tunneling", "contact", "creep"), params)`` of
-``gateway.model``: R = 2 R_con(F) + R0 (1 - eps) exp(-gamma s0 eps) with creeping strain
-eps = F/(A E0(F)) + e_kv (eq. 13-17), then the world effects of ``sim_device.world``.
+The paper's sensor as ``sim_device.sensor.PaperSensor`` writes it, independently of the
+gateway: R = 2 R_con(F) + R0 (1 - eps) exp(-gamma s0 eps) with creeping strain
+eps = F/(A E0(F)) + e_kv (eq. 13-17), the Kelvin strain integrated by Runge-Kutta; then the
+world effects of ``sim_device.world``.
 
 Electronics (paper Fig. 4b, eq. 18)
 -----------------------------------
 The sensor r and the fixed resistor R_ref form a divider, ``V_o = R_ref / (R_ref + r) V+``;
 a ratiometric ADC converts ``counts = round(V_o / V+ (2^bits - 1) + noise)``, clipped to the
 rails, with Gaussian noise of ``noise_lsb_rms`` LSB (seeded). The measured resistance is
-``r = R_ref (V+ / V_o - 1)`` from the counts (``gateway.model.Divider``): 0 counts reads
+``r = R_ref (V+ / V_o - 1)`` from the counts (``sim_device.electronics``): 0 counts reads
 +inf (open), full scale reads 0 (short). A channel set open reads 0 counts, a shorted one
 full scale, without noise (the input is clamped to a rail).
 
@@ -36,12 +37,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from gateway.model import Divider, ModelState, SensorModel, SensorParams
-
 from .config import ArrayConfig, check_electronics
+from .electronics import adc_counts, full_scale, resistance_from_counts
 from .faults import CHANNEL_MODES, FaultInjector
 from .registers import Electronics, InputImage, decode_holding_write, holding_image
 from .scenarios import Scenario
+from .sensor import PaperSensor, SimSensorParams
 from .world import World
 
 FloatArray = NDArray[np.float64]
@@ -49,7 +50,6 @@ Listener = Callable[["SampleBatch"], None]
 
 #: Bound on samples x channels simulated per catch-up (see the module docstring).
 MAX_WORK = 400_000
-PAPER_MODEL_EFFECTS = ("tunneling", "contact", "creep")
 VENDOR_NAME = "Tactile Gateway Project"
 PRODUCT_CODE = "TSA-SIM"
 PRODUCT_NAME = "Simulated MIS piezoresistive sensor array"
@@ -108,9 +108,8 @@ class SimArray:
         self.layout = cfg.layout
         self.scenario: Scenario = cfg.resolve_scenario()
         self._params = cfg.sensor_params(device_id)
-        self._model = SensorModel(PAPER_MODEL_EFFECTS, self._params)
-        self._world = World(cfg.world_effects, self._params, self._model.gamma_s0())
-        self._state: ModelState = self._model.initial_state()
+        self._sensor = PaperSensor(self._params)
+        self._world = World(cfg.world_effects, self._params, self._sensor.gamma_s0)
         self._n = cfg.channels
         self._electronics = Electronics(
             adc_bits=cfg.adc_bits,
@@ -119,7 +118,6 @@ class SimArray:
             sample_period_s=float(cfg.sample_period_s),
             noise_lsb_rms=float(cfg.noise_lsb_rms),
         )
-        self._divider = self._make_divider()
         self._modes = np.zeros(self._n, dtype=np.int8)
         self._rng = np.random.default_rng([cfg.seed, device_id, 1])
         self.faults = FaultInjector(seed=cfg.seed * 1000 + device_id)
@@ -145,7 +143,7 @@ class SimArray:
         return self._n
 
     @property
-    def channel_params(self) -> list[SensorParams]:
+    def channel_params(self) -> list[SimSensorParams]:
         """The true parameters of every channel (after part-to-part spread)."""
         return list(self._params)
 
@@ -170,10 +168,6 @@ class SimArray:
     @property
     def electronics(self) -> Electronics:
         return self._electronics
-
-    @property
-    def divider(self) -> Divider:
-        return self._divider
 
     @property
     def modes(self) -> NDArray[np.int8]:
@@ -243,14 +237,9 @@ class SimArray:
             changes = {**changes, "adc_bits": int(changes["adc_bits"])}
         old_period = self._electronics.sample_period_s
         self._electronics = replace(self._electronics, **changes)  # type: ignore[arg-type]
-        self._divider = self._make_divider()
         if self._electronics.sample_period_s != old_period:
             self._grid_t0, self._grid_index = self._last_t, 0
         self._version += 1
-
-    def _make_divider(self) -> Divider:
-        e = self._electronics
-        return Divider(supply_v=e.supply_v, reference_ohm=e.reference_ohm, adc_bits=e.adc_bits)
 
     def add_listener(self, listener: Listener) -> None:
         """Call ``listener(batch)`` with every new batch of samples."""
@@ -303,13 +292,14 @@ class SimArray:
         force = self.scenario.force_n(times)
         temperature = self.scenario.temperature_c(times)
         modes = self._mode_series(times)
-        breakdown, self._state = self._model.simulate(force, times, self._state, t0_s=self._last_t)
+        breakdown = self._sensor.run(force, times, self._last_t)
         true_r = self._world.apply(breakdown, force, temperature, dt_s)
         sensed_r = true_r
         if self.config.sensor_noise_rel > 0.0:
             sensed_r = true_r * np.exp(self.config.sensor_noise_rel * self._rng.standard_normal(true_r.shape))
         counts = self._convert(sensed_r, modes)
-        measured, _status = self._divider.resistance(counts)
+        e = self._electronics
+        measured = resistance_from_counts(counts, e.reference_ohm, e.adc_bits)
         self._counter += conversions
         self._last_t = float(times[-1])
         batch = SampleBatch(self.device_id, times, counts, measured, true_r, force, temperature, modes)
@@ -320,15 +310,13 @@ class SimArray:
 
     def _convert(self, true_r: FloatArray, modes: NDArray[np.int8]) -> NDArray[np.int64]:
         """Divider + ADC (eq. 18): ratiometric counts with Gaussian noise, clipped to the rails."""
-        d = self._divider
-        fs = d.full_scale
-        ratio = d.output_voltage(true_r) / d.supply_v
-        code = ratio * fs
-        if self._electronics.noise_lsb_rms > 0.0:
-            code = code + self._electronics.noise_lsb_rms * self._rng.standard_normal(code.shape)
-        counts = np.clip(np.rint(code), 0, fs).astype(np.int64)
+        e = self._electronics
+        noise: FloatArray | float = 0.0
+        if e.noise_lsb_rms > 0.0:
+            noise = e.noise_lsb_rms * self._rng.standard_normal(true_r.shape)
+        counts = adc_counts(true_r, e.reference_ohm, e.adc_bits, noise)
         counts[modes == CHANNEL_MODES["open"]] = 0
-        counts[modes == CHANNEL_MODES["short"]] = fs
+        counts[modes == CHANNEL_MODES["short"]] = full_scale(e.adc_bits)
         return counts
 
     # ----------------------------------------------------------------- registers
@@ -339,7 +327,7 @@ class SimArray:
             b = self._last_batch
             counts = b.adc_counts[0]
             modes = b.modes[0]
-            fs = self._divider.full_scale
+            fs = full_scale(self._electronics.adc_bits)
             normal = modes == CHANNEL_MODES["normal"]
             self._image_words = self._image.update(
                 sample_counter=self._counter,

@@ -3,8 +3,9 @@
 Part-to-part spread
 -------------------
 Real sensors of one batch differ. With ``param_spread=True`` every channel draws its own
-parameters around the project defaults (``SensorParams()``, the Linqstat set), uniformly and
-reproducibly from ``seed`` and the device id (``DEFAULT_SPREAD``):
+parameters around the project defaults (``SimSensorParams()``, the Linqstat set of
+``docs/parameters.md``), uniformly and reproducibly from ``seed`` and the device id
+(``DEFAULT_SPREAD``):
 
 ====================  ==========
 parameter             spread
@@ -17,7 +18,7 @@ parameter             spread
 ====================  ==========
 
 ``param_spread`` may also be a mapping ``{parameter name: relative half-width}``. Parameters
-can instead be given per channel (``channel_params``, one ``SensorParams`` per channel, or a
+can instead be given per channel (``channel_params``, one ``SimSensorParams`` per channel, or a
 single one for all channels); then no spread is applied.
 
 World effects
@@ -36,13 +37,13 @@ from typing import Any
 
 import numpy as np
 
-from gateway.model import EFFECT_NAMES, PAPER_EFFECTS, SensorParams
-from gateway.model.params import ParameterError
-
 from .scenarios import ArrayLayout, Scenario
+from .sensor import SensorParamsError, SimSensorParams
 
-#: Effects the simulated world can add beyond the paper's model.
-WORLD_EFFECTS: tuple[str, ...] = tuple(e for e in EFFECT_NAMES if e not in PAPER_EFFECTS)
+#: The paper's effects (always on) and those the simulated world can add, by their names in
+#: the record format (``docs/record-format.md``).
+PAPER_EFFECTS: tuple[str, ...] = ("tunneling", "contact", "creep")
+WORLD_EFFECTS: tuple[str, ...] = ("creep2", "hysteresis", "temperature", "series_resistance", "leakage")
 
 #: Default part-to-part spread: parameter -> relative half-width of a uniform distribution.
 DEFAULT_SPREAD: dict[str, float] = {
@@ -119,7 +120,7 @@ class ArrayConfig:
     sensor_noise_rel: float = 0.0
     world_effects: tuple[str, ...] = ()
     param_spread: bool | Mapping[str, float] = True
-    channel_params: SensorParams | Sequence[SensorParams] | None = None
+    channel_params: SimSensorParams | Sequence[SimSensorParams] | None = None
     sample_period_s: float = 0.01
     supply_v: float = 5.0
     reference_ohm: float = 10e3
@@ -172,15 +173,15 @@ class ArrayConfig:
             raise ConfigError(f"scenario must be a name, a TOML path or a Scenario, got {self.scenario!r}")
         spread = self._spread()
         for name, width in spread.items():
-            if name not in {f.name for f in fields(SensorParams)}:
+            if name not in {f.name for f in fields(SimSensorParams)}:
                 raise ConfigError(f"param_spread names unknown sensor parameter {name!r}")
             if not (math.isfinite(width) and 0.0 <= width < 1.0):
                 raise ConfigError(f"param_spread[{name!r}] = {width!r} must be in [0, 1)")
         cp = self.channel_params
-        if cp is not None and not isinstance(cp, SensorParams):
+        if cp is not None and not isinstance(cp, SimSensorParams):
             items = list(cp)
-            if len(items) != self.channels or not all(isinstance(p, SensorParams) for p in items):
-                raise ConfigError(f"channel_params must be one SensorParams or {self.channels} of them")
+            if len(items) != self.channels or not all(isinstance(p, SimSensorParams) for p in items):
+                raise ConfigError(f"channel_params must be one SimSensorParams or {self.channels} of them")
             object.__setattr__(self, "channel_params", tuple(items))
 
     @property
@@ -202,21 +203,21 @@ class ArrayConfig:
             return self.scenario
         return Scenario.load(self.scenario, self.layout)
 
-    def sensor_params(self, device_id: int = 1) -> list[SensorParams]:
+    def sensor_params(self, device_id: int = 1) -> list[SimSensorParams]:
         """The true parameters of every channel (spread drawn from ``seed`` and ``device_id``)."""
         cp = self.channel_params
-        if isinstance(cp, SensorParams):
+        if isinstance(cp, SimSensorParams):
             return [cp] * self.channels
         if cp is not None:
             return list(cp)
-        base = SensorParams()
+        base = SimSensorParams()
         spread = self._spread()
         if not spread:
             return [base] * self.channels
         rng = np.random.default_rng([self.seed, device_id, 0])
         names = sorted(spread)
         draws = rng.uniform(-1.0, 1.0, size=(self.channels, len(names)))
-        out: list[SensorParams] = []
+        out: list[SimSensorParams] = []
         for row in draws:
             overrides: dict[str, Any] = {
                 name: getattr(base, name) * (1.0 + spread[name] * u)
@@ -224,7 +225,7 @@ class ArrayConfig:
             }
             try:
                 out.append(base.with_overrides(overrides))
-            except ParameterError as exc:
+            except SensorParamsError as exc:
                 raise ConfigError(f"param_spread gives an invalid parameter: {exc}") from exc
         return out
 

@@ -1,7 +1,7 @@
 """The simulated world: effects beyond the paper, implemented here independently of the model.
 
 The paper's physics (tunneling eq. 2-9, Holm contact eq. 10-12, one-Kelvin creep eq. 14-17)
-comes from ``gateway.model.SensorModel``. The world then modifies the sensor it produced:
+comes from ``sim_device.sensor.PaperSensor``. The world then modifies the sensor it produced:
 
 ``creep2``
     A second Kelvin element in series with the paper's, strain ``e2`` obeying
@@ -28,7 +28,7 @@ comes from ``gateway.model.SensorModel``. The world then modifies the sensor it 
     unloaded resistance (an unloaded sensor reads 2 Mohm instead of open) and lowers a
     0.5 N reading by about 6 %.
 
-The magnitudes are read from each channel's ``SensorParams`` so the true parameters of a
+The magnitudes are read from each channel's ``SimSensorParams`` so the true parameters of a
 channel (``SimArray.channel_params``) describe the world exactly where the forms coincide.
 """
 
@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import constants, signal
 
-from gateway.model import ResistanceBreakdown, SensorParams
+from .sensor import PaperResistance, SimSensorParams
 
 FloatArray = NDArray[np.float64]
 
@@ -135,7 +135,9 @@ def activation_energy_ev(coeff_per_k: float, reference_c: float = 25.0) -> float
 class World:
     """Applies the switched-on world effects to the model's resistance breakdown."""
 
-    def __init__(self, effects: Sequence[str], params: Sequence[SensorParams], gamma_s0: FloatArray) -> None:
+    def __init__(
+        self, effects: Sequence[str], params: Sequence[SimSensorParams], gamma_s0: FloatArray
+    ) -> None:
         self.effects = tuple(effects)
         self.n_channels = len(params)
 
@@ -156,7 +158,7 @@ class World:
 
     def apply(
         self,
-        breakdown: ResistanceBreakdown,
+        breakdown: PaperResistance,
         force_n: FloatArray,
         temperature_c: FloatArray,
         dt_s: float,

@@ -18,6 +18,7 @@ from ..config import GatewayConfig, RegisterMap, load_config
 from ..errors import ConfigError
 from ..runtime.poller import Poller, SnapshotHolder
 from .common import config_option
+from .simulated import gateway_params
 
 
 def _progress(elapsed_s: float, duration_s: float, stats: RecorderStats, final: bool = False) -> None:
@@ -112,13 +113,14 @@ async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, objec
     creep_cfg = ArrayConfig(channels=1, columns=1, seed=7, scenario="creep-test", speed=speed)
     stair_cfg = creep_cfg.with_changes(scenario="staircase", speed=speed / 10.0)
     creep, stair = SimArray(creep_cfg, device_id=1), SimArray(stair_cfg, device_id=2)
+    creep_params, stair_params = gateway_params(creep.channel_params), gateway_params(stair.channel_params)
     bench = RegisterMap(force_reference_address=1000, temperature_address=1600)
     divider = Divider(creep_cfg.supply_v, creep_cfg.reference_ohm, creep_cfg.adc_bits)
     creep_path, stair_path = out_dir / "creep_tests.csv", out_dir / "staircase.csv"
     async with serve_tcp([creep, stair], host="127.0.0.1", port=0) as sim:
         devices = [
-            device_config_for("creep", 1, creep.channel_params, 1, 2.5, divider=divider, registers=bench),
-            device_config_for("staircase", 2, stair.channel_params, 1, 2.5, divider=divider, registers=bench),
+            device_config_for("creep", 1, creep_params, 1, 2.5, divider=divider, registers=bench),
+            device_config_for("staircase", 2, stair_params, 1, 2.5, divider=divider, registers=bench),
         ]
         bus = bus_config_for("sim", "tcp", devices, host="127.0.0.1", port=sim.port, poll_interval_s=0.02)
         config = gateway_config_for([bus])
@@ -130,7 +132,7 @@ async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, objec
             record_live(config, creep_path, durations[0], device="creep", show_progress=False),
             record_live(config, stair_path, durations[1], device="staircase", show_progress=False),
         )
-    return creep_path, stair_path, creep.channel_params[0]
+    return creep_path, stair_path, creep_params[0]
 
 
 @click.command("paper")

@@ -41,6 +41,7 @@ from ..model import Divider
 from ..runtime.poller import Poller, SnapshotHolder
 from ..runtime.snapshot import ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from .common import config_option
+from .simulated import gateway_params
 
 log = logging.getLogger("gateway.run")
 
@@ -290,7 +291,9 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
     tty = out.isatty()
     try:
         async with serve_tcp([array], host="127.0.0.1", port=0) as sim:
-            device = device_config_for("demo", 1, array.channel_params, 4, 2.5, divider=divider)
+            device = device_config_for(
+                "demo", 1, gateway_params(array.channel_params), 4, 2.5, divider=divider
+            )
             bus = bus_config_for(
                 "sim", "tcp", [device], host="127.0.0.1", port=sim.port, poll_interval_s=0.05
             )

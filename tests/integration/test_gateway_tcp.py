@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gateway.cli.simulated import gateway_params
 from gateway.config import (
     BusConfig,
     DeviceConfig,
@@ -131,7 +132,7 @@ def array_device(array: SimArray, name: str, device_id: int = 1, bench: bool = T
     return device_config_for(
         name,
         device_id,
-        array.channel_params,
+        gateway_params(array.channel_params),
         cfg.columns,
         cfg.pitch_mm,
         divider=Divider(cfg.supply_v, cfg.reference_ohm, cfg.adc_bits),

@@ -22,9 +22,9 @@ from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, Async
 from pymodbus.exceptions import ModbusException
 from pymodbus.framer import FramerType
 
-from gateway.model import Divider, SensorModel
 from sim_device import ArrayConfig, LineTiming, Scenario, SimArray, serve_serial, serve_tcp, serve_tls
 from sim_device import registers as reg
+from sim_device.sensor import PaperSensor
 
 Client = AsyncModbusTcpClient | AsyncModbusSerialClient | AsyncModbusTlsClient
 
@@ -83,17 +83,18 @@ async def snapshot(client: Client, n: int, device_id: int = 1) -> dict[str, np.n
 
 
 def check_against_model(data: dict[str, np.ndarray | int], array: SimArray) -> None:
-    """ADC counts as the paper model predicts for the scripted load, within the configured noise."""
+    """What the registers say is the array's physics for the scripted load: the true
+    resistance of its sensor model run over the whole history in one go (the server
+    advances it lazily, in pieces), the ADC counts of eq. 18 within the configured noise,
+    the float32 block eq. 18 of the counts, the bench force the scenario's."""
     period = array.config.sample_period_s
     counter = int(data["counter"])
     times = np.arange(counter) * period
     assert int(data["time_ms"]) == round(times[-1] * 1000.0)
     force = array.scenario.force_n(times)
-    model = SensorModel(("tunneling", "contact", "creep"), array.channel_params)
-    breakdown, _ = model.simulate(force, times, t0_s=0.0)
-    r_model = breakdown.total_ohm[-1]
-    divider = Divider(array.config.supply_v, array.config.reference_ohm, array.config.adc_bits)
-    expected = divider.output_voltage(r_model) / divider.supply_v * divider.full_scale
+    r_model = PaperSensor(array.channel_params).run(force, times, 0.0).total_ohm[-1]
+    r_ref, full_scale = array.config.reference_ohm, 2**array.config.adc_bits - 1
+    expected = r_ref / (r_ref + r_model) * full_scale
     noise = array.config.noise_lsb_rms
     assert np.abs(np.asarray(data["adc"]) - expected).max() <= 6.0 * noise + 1.0
     np.testing.assert_allclose(np.asarray(data["true_resistance"]), r_model, rtol=1e-6)
@@ -103,9 +104,7 @@ def check_against_model(data: dict[str, np.ndarray | int], array: SimArray) -> N
     # float32 block = eq. 18 of the ADC block
     counts = np.asarray(data["adc"], dtype=np.float64)
     with np.errstate(divide="ignore"):
-        from_counts = np.where(
-            counts == 0, np.inf, divider.reference_ohm * (divider.full_scale / counts - 1.0)
-        )
+        from_counts = np.where(counts == 0, np.inf, r_ref * (full_scale / counts - 1.0))
     np.testing.assert_array_equal(np.asarray(data["resistance"]), from_counts.astype(np.float32))
 
 

@@ -1,7 +1,7 @@
 """The discrepancy workflow names the effect hidden in data from the simulated world.
 
-Records come from the simulated array's physics: the paper's model for tunneling, contact
-and creep, and ``sim_device.world`` (written independently of ``gateway.model``) for the
+Records come from the simulated array, whose physics is written independently of the gateway:
+the paper's tunneling, contact and creep, and ``sim_device.world`` for the
 hidden effect, driven by the built-in ``discrepancy`` protocol (log-spaced loads 0.2-8 N,
 holds, unload-and-hold, ramps at two rates, cycles, a temperature step), with 1 %
 log-normal resistance noise.
@@ -23,8 +23,7 @@ from click.testing import CliRunner
 from gateway.analysis.discrepancy import DiscrepancyReport, run_discrepancy
 from gateway.analysis.records import ChannelRecord, read_record
 from gateway.cli import main
-from gateway.model import SensorParams
-from sim_device import ArrayConfig, record_offline
+from sim_device import ArrayConfig, SimSensorParams, record_offline
 
 NOISE = 0.01
 PAPER = ("tunneling", "contact", "creep")
@@ -49,7 +48,7 @@ def world_channel(hidden: tuple[str, ...], seed: int, record_period_s: float = 2
     spec's record format; the workflow reads it back with the strict reader.
     """
     rng = np.random.default_rng(seed)
-    params = SensorParams(
+    params = SimSensorParams(
         r0_ohm=200e3 * rng.uniform(0.85, 1.15),
         e0_pa=15e6 * rng.uniform(0.9, 1.1),
         e1_pa=150e6 * rng.uniform(0.9, 1.1),
