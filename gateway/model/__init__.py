@@ -1,8 +1,17 @@
-"""The piezoresistive sensor model (numpy and scipy only; no I/O).
+"""The piezoresistive sensor model (numpy and scipy only; no I/O, nothing else of ours).
 
 Kalantari et al.: tunneling through the polymer (eq. 1-9), Holm contact resistance
 (eq. 10-13), standard-linear-solid creep (eq. 14-17), read out through a divider (eq. 18);
-plus the further effects named in the measurement-records spec.
+plus the further effects named in ``docs/record-format.md``.
+
+* ``params``: the parameters (``docs/parameters.md`` defaults) and their allowed ranges;
+* ``physics``: the paper's equations as vectorized functions;
+* ``submodels/``: one module per effect, each with its null variant; ``effects``: their table;
+* ``evaluator``: the one evaluator of R(F), its slope, and every term (``ResistanceBreakdown``);
+* ``state``: the per-channel state the state-carrying effects own;
+* ``inversion``: force from resistance (statuses, Newton solvers);
+* ``model``: ``SensorModel``, which puts them together;
+* ``divider``: the read-out of eq. 18 and the paper's conductance line.
 """
 
 from .divider import ConductanceLine, Divider, DividerStatus
@@ -10,14 +19,19 @@ from .effects import (
     EFFECT_DESCRIPTIONS,
     EFFECT_NAMES,
     EFFECT_PARAMETERS,
+    EFFECTS,
     PAPER_EFFECTS,
     UnknownEffectError,
     parse_effects,
 )
-from .model import ForceStatus, Inversion, ModelState, ResistanceBreakdown, SensorModel
+from .evaluator import ResistanceBreakdown
+from .inversion import ForceStatus, Inversion
+from .model import SensorModel
 from .params import ChannelParams, ParameterError, SensorParams, parameter_names
+from .state import ModelState
 
 __all__ = [
+    "EFFECTS",
     "EFFECT_DESCRIPTIONS",
     "EFFECT_NAMES",
     "EFFECT_PARAMETERS",

@@ -1,9 +1,10 @@
-"""Named, switchable model effects (the names of ``shared/spec/measurement-records.md``).
+"""Named, switchable model effects (the names of ``docs/record-format.md``) and their table.
 
-A model is the ``tunneling`` baseline plus a set of named effects. Each effect is a term
-with an "off" form (zero added resistance, zero added strain, an infinite parallel path,
-a unit temperature factor), so switching one off reduces the model exactly to the one
-without it.
+A model is the ``tunneling`` baseline plus a set of named effects. Each effect is a submodel
+(``submodels/<effect>.py``) with a null variant that adds nothing (zero added resistance,
+zero added strain, an infinite parallel path, a unit temperature factor), so switching one
+off reduces the model exactly to the one without it. ``EFFECTS`` is the table: adding an
+effect is one new submodel module and one row here.
 """
 
 from __future__ import annotations
@@ -11,41 +12,45 @@ from __future__ import annotations
 import difflib
 from collections.abc import Iterable
 
-#: Every effect name of the interchange contract, in canonical order.
-EFFECT_NAMES: tuple[str, ...] = (
-    "tunneling",
-    "contact",
-    "creep",
-    "creep2",
-    "hysteresis",
-    "temperature",
-    "series_resistance",
-    "leakage",
+from .submodels import (
+    Contact,
+    Creep,
+    Creep2,
+    Hysteresis,
+    Leakage,
+    NoContact,
+    NoCreep,
+    NoCreep2,
+    NoHysteresis,
+    NoLeakage,
+    NoSeriesResistance,
+    NoTemperature,
+    SeriesResistance,
+    Submodel,
+    Temperature,
+    Tunneling,
 )
 
-#: What each effect adds, in words (for help texts and reports).
-EFFECT_DESCRIPTIONS: dict[str, str] = {
-    "tunneling": "polymer resistance from inter-particle tunneling (eq. 2-9), always on",
-    "contact": "Holm contact resistance of the two electrodes (eq. 10-12)",
-    "creep": "standard-linear-solid creep, one Kelvin element (eq. 14-16, 19)",
-    "creep2": "a second, slower Kelvin element (Prony series)",
-    "hysteresis": "loading and unloading follow different curves at the same force",
-    "temperature": "polymer resistance depends on sensor temperature",
-    "series_resistance": "a constant resistance in series (leads, traces)",
-    "leakage": "a constant resistance in parallel that caps the unloaded resistance",
+#: Every effect of the interchange contract, in canonical order: (on form, off form).
+EFFECTS: dict[str, tuple[type[Submodel], type[Submodel] | None]] = {
+    "tunneling": (Tunneling, None),
+    "contact": (Contact, NoContact),
+    "creep": (Creep, NoCreep),
+    "creep2": (Creep2, NoCreep2),
+    "hysteresis": (Hysteresis, NoHysteresis),
+    "temperature": (Temperature, NoTemperature),
+    "series_resistance": (SeriesResistance, NoSeriesResistance),
+    "leakage": (Leakage, NoLeakage),
 }
 
+#: Every effect name of the interchange contract, in canonical order.
+EFFECT_NAMES: tuple[str, ...] = tuple(EFFECTS)
+
+#: What each effect adds, in words (for help texts and reports).
+EFFECT_DESCRIPTIONS: dict[str, str] = {name: on.description for name, (on, _) in EFFECTS.items()}
+
 #: The sensor parameters each effect brings into a fit.
-EFFECT_PARAMETERS: dict[str, tuple[str, ...]] = {
-    "tunneling": ("r0_ohm", "e0_pa", "e0_slope_pa_per_n"),
-    "contact": ("rho2_ohm_m",),
-    "creep": ("e1_pa", "e1_slope_pa_per_n", "mu1_pa_s", "mu1_slope_pa_s_per_n"),
-    "creep2": ("e2_pa", "mu2_pa_s"),
-    "hysteresis": ("hysteresis_strain", "hysteresis_force_n"),
-    "temperature": ("temperature_coeff_per_k",),
-    "series_resistance": ("series_resistance_ohm",),
-    "leakage": ("leakage_resistance_ohm",),
-}
+EFFECT_PARAMETERS: dict[str, tuple[str, ...]] = {name: on.parameters for name, (on, _) in EFFECTS.items()}
 
 #: The paper's full model (eq. 17).
 PAPER_EFFECTS: tuple[str, ...] = ("tunneling", "contact", "creep")

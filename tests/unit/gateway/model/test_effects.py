@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from gateway.model import EFFECT_NAMES, SensorModel, SensorParams, UnknownEffectError, parse_effects
+from gateway.model import (
+    EFFECT_NAMES,
+    PAPER_EFFECTS,
+    SensorModel,
+    SensorParams,
+    UnknownEffectError,
+    parse_effects,
+)
 
 
 def test_names_are_the_spec_names_in_order() -> None:
@@ -87,3 +94,81 @@ def test_hysteresis_loading_reads_higher_than_unloading() -> None:
     loading, unloading = r[:40], r[40:][::-1]
     # same force, two branches: loading has the lower strain and so the higher resistance
     assert np.all(loading[5:-5] > unloading[5:-5])
+
+
+def test_the_effect_table_has_both_forms_of_every_contract_effect() -> None:
+    from gateway.model import EFFECTS
+    from gateway.model.submodels import Submodel
+
+    assert tuple(EFFECTS) == EFFECT_NAMES
+    for name, (on, off) in EFFECTS.items():
+        assert issubclass(on, Submodel) and on.effect == name and on.active
+        if name == "tunneling":
+            assert off is None  # the baseline cannot be switched off
+            continue
+        assert off is not None and issubclass(off, on) and off.effect == name and not off.active
+
+
+@pytest.mark.parametrize("effect", [e for e in EFFECT_NAMES if e != "tunneling"])
+def test_each_effect_switched_off_is_the_model_without_it(effect: str) -> None:
+    """Switching one effect on with neutral parameters leaves every output unchanged."""
+    neutral = {
+        "contact": {"rho1_ohm_m": 0.0, "rho2_ohm_m": 0.0},
+        "creep": {"e1_slope_pa_per_n": 0.0, "mu1_pa_s": 1e30},
+        "creep2": {"mu2_pa_s": 1e30},
+        "hysteresis": {"hysteresis_strain": 0.0},
+        "temperature": {"temperature_coeff_per_k": 0.0},
+        "series_resistance": {"series_resistance_ohm": 0.0},
+        "leakage": {"leakage_resistance_ohm": math.inf},
+    }[effect]
+    p = SensorParams(**neutral)
+    t = np.arange(0.0, 50.0, 0.5)
+    force = (2.0 + np.sin(t / 5.0))[:, None]
+    without = SensorModel("tunneling", p).simulate(force, t, temperature_c=40.0)[0].total_ohm
+    with_it = SensorModel(["tunneling", effect], p).simulate(force, t, temperature_c=40.0)[0].total_ohm
+    np.testing.assert_allclose(with_it, without, rtol=1e-12)
+
+
+def test_breakdown_lists_every_term_by_hand() -> None:
+    """(T R_pol + 2 R_con + R_series) || R_leak with the strains of each effect, at 2 N and 40 degC
+    after a 100 s hold, worked out from the closed forms."""
+    p = SensorParams()
+    f, t = 2.0, 100.0
+    m = SensorModel(EFFECT_NAMES, p)
+    b = m.held_step(np.array([f]), t, temperature_c=40.0)
+    elastic = f / (p.area_m2 * (p.e0_pa + p.e0_slope_pa_per_n * f))
+    e1, mu1 = p.e1_pa + p.e1_slope_pa_per_n * f, p.mu1_pa_s + p.mu1_slope_pa_s_per_n * f
+    kv1 = f / (p.area_m2 * e1) * (1 - math.exp(-e1 * t / mu1))
+    kv2 = f / (p.area_m2 * p.e2_pa) * (1 - math.exp(-p.e2_pa * t / p.mu2_pa_s))
+    travel = f - 0.1 * p.hysteresis_force_n  # the play's dead band is a tenth of F_h
+    hyst = -p.hysteresis_strain * (1 - math.exp(-travel / p.hysteresis_force_n))
+    factor = math.exp(p.temperature_coeff_per_k * (40.0 - p.reference_temperature_c))
+    strain = elastic + kv1 + kv2 + hyst
+    gs0 = float(m.gamma_s0()[0])
+    polymer = factor * p.r0_ohm * (1 - strain) * math.exp(-gs0 * strain)
+    contact = (p.rho1_ohm_m + p.rho2_ohm_m) / 2 * math.sqrt(math.pi * p.hardness_pa / f)
+    core = polymer + contact + p.series_resistance_ohm
+    total = core * p.leakage_resistance_ohm / (core + p.leakage_resistance_ohm)
+    expected = {
+        "elastic_strain": elastic,
+        "kv1_strain": kv1,
+        "kv2_strain": kv2,
+        "hysteresis_strain": hyst,
+        "strain": strain,
+        "temperature_factor": factor,
+        "polymer_ohm": polymer,
+        "contact_ohm": contact,
+        "series_ohm": p.series_resistance_ohm,
+        "leakage_ohm": p.leakage_resistance_ohm,
+        "total_ohm": total,
+    }
+    got = b.components()
+    assert set(got) == set(expected)
+    for name, value in expected.items():
+        assert float(got[name][0]) == pytest.approx(value, rel=1e-12), name
+
+
+def test_breakdown_of_an_effect_that_is_off_is_its_neutral_term() -> None:
+    b = SensorModel(PAPER_EFFECTS, SensorParams()).held_step(np.array([1.0]), 10.0, temperature_c=80.0)
+    assert b.series_ohm[0] == 0.0 and np.isinf(b.leakage_ohm[0]) and b.temperature_factor[0] == 1.0
+    assert b.kv2_strain[0] == 0.0 and b.hysteresis_strain[0] == 0.0 and b.kv1_strain[0] > 0.0

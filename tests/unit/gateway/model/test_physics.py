@@ -7,10 +7,10 @@ import pytest
 
 from gateway.model import SensorModel, SensorParams
 from gateway.model.physics import (
-    contact_resistance_ohm,
+    contact_coefficient_ohm_sqrt_n,
     interparticle_separation_m,
+    kelvin_held_strain,
     kelvin_step,
-    step_strain,
     tunneling_decay_per_m,
 )
 
@@ -86,11 +86,12 @@ def test_polymer_resistance_by_hand_at_half_newton() -> None:
 
 
 def test_contact_is_open_at_rest_not_nan() -> None:
-    r = contact_resistance_ohm(1.68e-8, 1.0, 30e6, np.array([0.0, -1.0, 1.0]))
-    assert np.isinf(r[0]) and np.isinf(r[1]) and np.isfinite(r[2])
-    total = SensorModel("tunneling,contact", SensorParams()).resistance(np.array([0.0]))
-    assert np.isinf(total[0])
-    assert not np.isnan(total).any()
+    b = SensorModel("tunneling,contact", SensorParams()).breakdown(np.array([0.0, -1.0, 1.0]))
+    assert np.isinf(b.contact_ohm[0]) and np.isinf(b.contact_ohm[1]) and np.isfinite(b.contact_ohm[2])
+    assert np.isinf(b.total_ohm[:2]).all() and not np.isnan(b.total_ohm).any()
+    # both contacts, eq. 12 by hand: 2 (rho1 + rho2)/4 sqrt(pi H / F)
+    k = float(contact_coefficient_ohm_sqrt_n(1.68e-8, 1.0, 30e6))
+    assert k == pytest.approx(2 * (1.0 + 1.68e-8) / 4 * np.sqrt(np.pi * 30e6), rel=1e-15)
 
 
 def test_without_contact_unloaded_sensor_reads_r0() -> None:
@@ -104,8 +105,10 @@ def test_long_time_strain_limit() -> None:
     e0 = p.e0_pa + p.e0_slope_pa_per_n * f
     e1 = p.e1_pa + p.e1_slope_pa_per_n * f
     mu1 = p.mu1_pa_s + p.mu1_slope_pa_s_per_n * f
-    strain = step_strain(f, 1e6, p.area_m2, e0, e1, mu1)
-    assert float(strain) == pytest.approx(f / p.area_m2 * (1 / e0 + 1 / e1), rel=1e-12)
+    assert float(kelvin_held_strain(f, 1e6, p.area_m2, e1, mu1)) == pytest.approx(
+        f / (p.area_m2 * e1), rel=1e-12
+    )
+    assert float(kelvin_held_strain(f, 0.0, p.area_m2, e1, mu1)) == 0.0
     b = SensorModel("tunneling,creep", p).held_step(np.array([f]), 1e6)
     assert float(b.strain[0]) == pytest.approx(f / p.area_m2 * (1 / e0 + 1 / e1), rel=1e-12)
 
