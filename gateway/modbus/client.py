@@ -1,14 +1,14 @@
-"""Modbus transport of one bus: the only gateway module that imports pymodbus.
+"""The pymodbus backend of the transport interface: the only gateway module that imports pymodbus.
 
 One ``ModbusTransport`` per bus (TCP, RTU on a serial line, RTU framing over TCP, or Modbus
-TCP over TLS). It sends one request at a time (a serial line is half duplex; on TCP it
-keeps the device's view simple) and turns every pymodbus outcome into the gateway's own
-errors:
+TCP over TLS), a ``transport.Transport`` whose template methods own the lock, the checks
+and the error mapping. Here: building the pymodbus client for the bus kind, and what only
+pymodbus' outcomes tell:
 
 * an exception response -> ``DeviceExceptionResponse`` (with the Modbus exception code);
-* no answer in ``timeout_s`` -> ``DeviceTimeoutError``;
-* bytes came back but no valid frame (bad CRC, garbage), a wrong register count or the
-  wrong function -> ``DecodeError``;
+* no answer in ``timeout_s`` -> ``DeviceTimeoutError``; bytes came back but no valid frame
+  (bad CRC, garbage) -> ``DecodeError`` (pymodbus bounds each wait itself, so it can tell);
+* the wrong function in the answer -> ``DecodeError``;
 * a connection that cannot be made or is lost -> ``DeviceConnectionError``.
 
 pymodbus' own retries and automatic reconnection are switched off: the poller retries and
@@ -22,8 +22,8 @@ import contextlib
 import functools
 import logging
 import ssl
-from collections.abc import Awaitable, Callable, Sequence
-from typing import Any
+from collections.abc import Awaitable, Callable
+from typing import Any, ClassVar
 
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, AsyncModbusTlsClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -36,9 +36,9 @@ from ..errors import (
     DeviceExceptionResponse,
     DeviceTimeoutError,
     GatewayError,
-    WriteNotAllowedError,
 )
 from .endpoint import Endpoint, TlsSettings
+from .transport import EXCEPTION_NAMES, Transport
 
 log = logging.getLogger(__name__)
 
@@ -47,9 +47,6 @@ FC_READ_HOLDING = 0x03
 FC_READ_INPUT = 0x04
 FC_WRITE_MULTIPLE = 0x10
 FC_DEVICE_ID = 0x2B
-#: Most registers one read may ask for (Modbus application protocol, function 3/4).
-MAX_READ_COUNT = 125
-MAX_WRITE_COUNT = 123
 
 #: Read Device Identification object ids (MEI type 14).
 DEVICE_ID_OBJECTS: dict[int, str] = {
@@ -60,18 +57,6 @@ DEVICE_ID_OBJECTS: dict[int, str] = {
     0x04: "ProductName",
     0x05: "ModelName",
     0x06: "UserApplicationName",
-}
-
-EXCEPTION_NAMES: dict[int, str] = {
-    1: "illegal function",
-    2: "illegal data address",
-    3: "illegal data value",
-    4: "server device failure",
-    5: "acknowledge",
-    6: "server device busy",
-    8: "memory parity error",
-    10: "gateway path unavailable",
-    11: "gateway target device failed to respond",
 }
 
 
@@ -93,15 +78,16 @@ def build_ssl_context(tls: TlsSettings) -> ssl.SSLContext:
     return ctx
 
 
-class ModbusTransport:
-    """Asynchronous Modbus client of one bus (see the module docstring)."""
+class ModbusTransport(Transport):
+    """Asynchronous pymodbus client of one bus (see the module docstring)."""
+
+    bounds_own_wait: ClassVar[bool] = True
+    values_are_16_bit: ClassVar[bool] = True
 
     def __init__(self, bus: Endpoint) -> None:
+        super().__init__(bus.name, bus.timeout_s)
         self.bus = bus
-        self.name = bus.name
-        self.timeout_s = float(bus.timeout_s)
         self._client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None
-        self._lock = asyncio.Lock()
         self._rx_seen = False
         self._connect_error: BaseException | None = None
         self._ssl_context: ssl.SSLContext | None = None
@@ -205,9 +191,7 @@ class ModbusTransport:
         client.ctx.call_create = create
         return client
 
-    async def connect(self) -> None:
-        """Open the connection (or serial port); ``DeviceConnectionError`` on failure."""
-        await self.close()
+    async def _connect(self) -> None:
         self._connect_error = None
         try:
             client = self._make_client()
@@ -226,11 +210,9 @@ class ModbusTransport:
             ok = False
         if not ok or not client.connected:
             reason = self._connect_error or "no connection"
-            await self.close()
             raise DeviceConnectionError(f"bus {self.name!r}: cannot connect to {self.target}: {reason}")
         if self.bus.kind == "rtu":
             self._write_requests_at_once(client)
-        log.info("bus %s: connected to %s", self.name, self.target)
 
     @staticmethod
     def _write_requests_at_once(client: Any) -> None:
@@ -250,20 +232,12 @@ class ModbusTransport:
 
         transport.write = write_at_once
 
-    async def close(self) -> None:
-        """Close the connection; safe to call at any time and more than once."""
+    async def _close(self) -> None:
         client, self._client = self._client, None
         if client is not None:
             with contextlib.suppress(Exception):
                 client.close()
             await asyncio.sleep(0)  # let the transport's close callbacks run
-
-    async def __aenter__(self) -> ModbusTransport:
-        await self.connect()
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.close()
 
     # ------------------------------------------------------------------ hooks
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
@@ -281,33 +255,29 @@ class ModbusTransport:
             future.set_exception(ConnectionException(f"connection to {self.target} lost"))
 
     # ------------------------------------------------------------------ requests
-    async def _execute(self, what: str, device_id: int, call: Callable[[Any], Awaitable[Any]]) -> Any:
-        if not 0 <= device_id <= 247:
-            raise GatewayError(f"device id {device_id} outside 0..247")
-        async with self._lock:
-            client = self._client
-            if client is None or not client.connected:
-                raise DeviceConnectionError(f"bus {self.name!r}: not connected to {self.target}")
-            self._rx_seen = False
-            try:
-                response = await call(client)  # pymodbus bounds the wait by timeout_s
-            except ConnectionException as exc:
-                raise DeviceConnectionError(f"{what}: connection to {self.target} lost: {exc}") from exc
-            except ModbusIOException as exc:
-                raise self._classify_io(what, exc) from exc
-            except TimeoutError as exc:
-                raise self._timeout(what) from exc
-            except OSError as exc:
-                raise DeviceConnectionError(f"{what}: {self.target}: {exc}") from exc
-            except ModbusException as exc:
-                raise DecodeError(f"{what}: invalid response from {self.target}: {exc}") from exc
-            if response is None:
-                raise self._timeout(what)
-            if response.isError():
-                code = int(getattr(response, "exception_code", 0) or 0)
-                name = EXCEPTION_NAMES.get(code, "unknown exception")
-                raise DeviceExceptionResponse(f"{what}: device answered exception {code} ({name})", code)
-            return response
+    async def _execute(self, what: str, request: Awaitable[Any]) -> Any:
+        """One pymodbus request (bounded by pymodbus' own ``timeout_s``), its outcome
+        mapped to the gateway's errors; an exception response raises."""
+        self._rx_seen = False
+        try:
+            response = await request
+        except ConnectionException as exc:
+            raise DeviceConnectionError(f"{what}: connection to {self.target} lost: {exc}") from exc
+        except ModbusIOException as exc:
+            raise self._classify_io(what, exc) from exc
+        except TimeoutError as exc:
+            raise self._timeout(what) from exc
+        except OSError as exc:
+            raise DeviceConnectionError(f"{what}: {self.target}: {exc}") from exc
+        except ModbusException as exc:
+            raise DecodeError(f"{what}: invalid response from {self.target}: {exc}") from exc
+        if response is None:
+            raise self._timeout(what)
+        if response.isError():
+            code = int(getattr(response, "exception_code", 0) or 0)
+            name = EXCEPTION_NAMES.get(code, "unknown exception")
+            raise DeviceExceptionResponse(f"{what}: device answered exception {code} ({name})", code)
+        return response
 
     def _timeout(self, what: str) -> DeviceError:
         if self._rx_seen:
@@ -322,80 +292,47 @@ class ModbusTransport:
             return DeviceConnectionError(f"{what}: connection to {self.target} lost: {text}")
         return DecodeError(f"{what}: invalid response from {self.target}: {text}")
 
-    @staticmethod
-    def _check_read(what: str, response: Any, function_code: int, count: int) -> list[int]:
-        """The registers of a read answer; a wrong function or count is a ``DecodeError``.
+    def _live_client(self) -> AsyncModbusTcpClient | AsyncModbusSerialClient:
+        client = self._client
+        if client is None:
+            raise DeviceConnectionError(f"bus {self.name!r}: not connected to {self.target}")
+        return client
+
+    async def _read(self, kind: str, device_id: int, address: int, count: int, what: str) -> list[int]:
+        """The registers of a read answer; a wrong function is a ``DecodeError``.
 
         pymodbus decodes each register from two bytes, so values are always 0..65535.
         """
+        client = self._live_client()
+        if kind == "input":
+            response = await self._execute(
+                what, client.read_input_registers(address, count=count, device_id=device_id)
+            )
+            function_code = FC_READ_INPUT
+        else:
+            response = await self._execute(
+                what, client.read_holding_registers(address, count=count, device_id=device_id)
+            )
+            function_code = FC_READ_HOLDING
         if response.function_code != function_code:
             raise DecodeError(f"{what}: answer has function {response.function_code}")
         registers: list[int] = getattr(response, "registers", None) or []
-        if len(registers) != count:
-            raise DecodeError(f"{what}: asked for {count} registers, got {len(registers)}")
         return registers
 
-    @staticmethod
-    def _check_range(address: int, count: int, limit: int) -> None:
-        if not 1 <= count <= limit:
-            raise GatewayError(f"register count {count} outside 1..{limit}")
-        if not 0 <= address <= 0xFFFF or address + count > 0x10000:
-            raise GatewayError(f"register range {address}..{address + count - 1} outside 0..65535")
-
-    async def read_input_registers(self, device_id: int, address: int, count: int) -> list[int]:
-        """Function 4: ``count`` input registers from ``address`` (values 0..65535)."""
-        return await self._read_registers("input", device_id, address, count)
-
-    async def read_holding_registers(self, device_id: int, address: int, count: int) -> list[int]:
-        """Function 3: ``count`` holding registers from ``address``."""
-        return await self._read_registers("holding", device_id, address, count)
-
-    async def _read_registers(self, kind: str, device_id: int, address: int, count: int) -> list[int]:
-        self._check_range(address, count, MAX_READ_COUNT)
-        what = f"read {kind} {address}+{count} of device {device_id} on {self.name!r}"
-        if kind == "input":
-            response = await self._execute(
-                what, device_id, lambda c: c.read_input_registers(address, count=count, device_id=device_id)
-            )
-            return self._check_read(what, response, FC_READ_INPUT, count)
-        response = await self._execute(
-            what, device_id, lambda c: c.read_holding_registers(address, count=count, device_id=device_id)
-        )
-        return self._check_read(what, response, FC_READ_HOLDING, count)
-
-    async def write_registers(
-        self, device_id: int, address: int, values: Sequence[int], allow_write: bool
-    ) -> None:
-        """Function 16. Refused with ``WriteNotAllowedError`` before anything is sent unless
-        the device's configuration allows writes."""
-        if not allow_write:
-            raise WriteNotAllowedError(
-                f"write to registers {address}.. of device {device_id} on bus {self.name!r} refused: "
-                "the device configuration does not set allow_write = true"
-            )
-        regs = [int(v) for v in values]
-        self._check_range(address, len(regs), MAX_WRITE_COUNT)
-        if any(not 0 <= v <= 0xFFFF for v in regs):
-            raise GatewayError("register values must be in 0..65535")
-        what = f"write {address}+{len(regs)} of device {device_id} on {self.name!r}"
-        response = await self._execute(
-            what, device_id, lambda c: c.write_registers(address, regs, device_id=device_id)
-        )
+    async def _write(self, device_id: int, address: int, values: list[int], what: str) -> None:
+        client = self._live_client()
+        response = await self._execute(what, client.write_registers(address, values, device_id=device_id))
         if getattr(response, "function_code", None) != FC_WRITE_MULTIPLE:
             raise DecodeError(f"{what}: answer has function {getattr(response, 'function_code', None)}")
 
-    async def read_device_identification(self, device_id: int) -> dict[str, str]:
-        """Function 43/14 (regular objects): e.g. VendorName, ProductCode, ModelName."""
-        what = f"read device identification of device {device_id} on {self.name!r}"
+    async def _read_device_identification(self, device_id: int, what: str) -> dict[str, str]:
+        client = self._live_client()
         info: dict[str, str] = {}
         object_id = 0
         for _ in range(8):  # "more follows" continuation, bounded
-            oid = object_id
-
-            def request(c: Any, oid: int = oid) -> Awaitable[Any]:
-                return c.read_device_information(read_code=0x02, object_id=oid, device_id=device_id)
-
-            response = await self._execute(what, device_id, request)
+            response = await self._execute(
+                what, client.read_device_information(read_code=0x02, object_id=object_id, device_id=device_id)
+            )
             objects = getattr(response, "information", None)
             if not isinstance(objects, dict):
                 raise DecodeError(f"{what}: answer carries no objects")

@@ -1,9 +1,11 @@
 """The poll loop: one asyncio task per bus, publishing immutable snapshots.
 
-Each bus task connects its ``ModbusTransport``, then every ``poll_interval_s`` polls each
-of its devices: the coalesced reads of ``read_plan``, one request at a time, each retried
-up to ``retries`` times on a timeout or a garbled answer. The registers go through the
-pure ``pipeline`` and a new ``GatewaySnapshot`` is published after every device poll.
+Each bus task connects its transport (``gateway.modbus.transport.Transport``: the pymodbus
+client in production, an in-process virtual bus in unit tests), then every
+``poll_interval_s`` polls each of its devices: the coalesced reads of ``read_plan``, one
+request at a time, each retried up to ``retries`` times on a timeout or a garbled answer.
+The registers go through the pure ``processor`` and a new device snapshot is published
+after every device poll.
 
 The conversion of a poll (decode, drift-corrected forces, snapshot) is a ``Conversion`` of
 three steps. When the bus has more requests to make at once (back-to-back polling, or the
@@ -48,6 +50,7 @@ from ..errors import (
 from ..modbus.client import ModbusTransport
 from ..modbus.image import RegisterImage, RegisterKind, decode_sample
 from ..modbus.plan import MERGE_GAP, ReadRequest, device_plan
+from ..modbus.transport import Transport
 from .counters import DeviceCounters, Tally
 from .processor import DeviceProcessor, DeviceState
 from .snapshot import DeviceSnapshot
@@ -148,7 +151,7 @@ class BusWorker:
         runners: list[DeviceRunner],
         publish: Callable[[DeviceRunner, DeviceSnapshot], None],
         *,
-        transport_factory: Callable[[BusConfig], ModbusTransport] = ModbusTransport,
+        transport_factory: Callable[[BusConfig], Transport] = ModbusTransport,
         rng: random.Random | None = None,
         wall_clock: Callable[[], float] = time.time,
         monotonic: Callable[[], float] = time.monotonic,

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from ..config import BusConfig, GatewayConfig
 from ..modbus.client import ModbusTransport
 from ..modbus.plan import MERGE_GAP, device_plan
+from ..modbus.transport import Transport
 from .bus import BusWorker, DeviceRunner
 from .counters import DeviceCounters, Tally
 from .processor import DeviceProcessor
@@ -78,7 +79,7 @@ class Poller:
         config: GatewayConfig,
         holder: SnapshotHolder | None = None,
         *,
-        transport_factory: Callable[[BusConfig], ModbusTransport] = ModbusTransport,
+        transport_factory: Callable[[BusConfig], Transport] = ModbusTransport,
         rng: random.Random | None = None,
         wall_clock: Callable[[], float] = time.time,
         monotonic: Callable[[], float] = time.monotonic,

@@ -1,0 +1,241 @@
+"""The transport interface: a Modbus bus as the poller sees it (after python-can's ``BusABC``).
+
+``Transport`` owns what every backend shares, as template methods: one request at a time
+(a serial line is half duplex), argument checks, the per-request timeout, checking what came
+back, and turning every failure into the gateway's typed errors (``gateway.errors``):
+
+* no answer in time -> ``DeviceTimeoutError``;
+* a connection that cannot be made or is lost (``ConnectionError``, ``OSError``) ->
+  ``DeviceConnectionError``;
+* an exception response -> ``DeviceExceptionResponse`` with the Modbus exception code;
+* an answer of the wrong size or with values outside 0..65535 -> ``DecodeError``;
+* a write the device configuration does not allow -> ``WriteNotAllowedError``, before
+  anything is sent.
+
+A backend implements the primitives ``_connect``, ``_close``, ``_read``, ``_write`` and
+``_read_device_identification`` and the properties ``target`` and ``connected``; it may raise
+the typed errors itself where it knows better (a garbled frame, an exception code). The
+pymodbus backend is ``client.ModbusTransport``; ``virtual.VirtualTransport`` is an in-process
+bus for fast tests of everything above it.
+"""
+
+from __future__ import annotations
+
+import abc
+import asyncio
+import contextlib
+import logging
+from collections.abc import Sequence
+from typing import ClassVar
+
+from ..errors import (
+    DecodeError,
+    DeviceConnectionError,
+    DeviceTimeoutError,
+    GatewayError,
+    WriteNotAllowedError,
+)
+
+log = logging.getLogger(__name__)
+
+#: Most registers one read may ask for (Modbus application protocol, function 3/4).
+MAX_READ_COUNT = 125
+#: Most registers one write may carry (function 16).
+MAX_WRITE_COUNT = 123
+
+EXCEPTION_NAMES: dict[int, str] = {
+    1: "illegal function",
+    2: "illegal data address",
+    3: "illegal data value",
+    4: "server device failure",
+    5: "acknowledge",
+    6: "server device busy",
+    8: "memory parity error",
+    10: "gateway path unavailable",
+    11: "gateway target device failed to respond",
+}
+
+
+def check_range(address: int, count: int, limit: int) -> None:
+    """A register range a request may name: 1..``limit`` registers within 0..65535."""
+    if not 1 <= count <= limit:
+        raise GatewayError(f"register count {count} outside 1..{limit}")
+    if not 0 <= address <= 0xFFFF or address + count > 0x10000:
+        raise GatewayError(f"register range {address}..{address + count - 1} outside 0..65535")
+
+
+class Transport(abc.ABC):
+    """One Modbus bus (see the module docstring); ``timeout_s`` bounds one request (s)."""
+
+    #: True when the backend bounds each request by ``timeout_s`` itself (and can then tell a
+    #: garbled answer from none); the template method then adds no timer of its own.
+    bounds_own_wait: ClassVar[bool] = False
+    #: True when the backend can only return values 0..65535 (it decodes two bytes each);
+    #: the template method then does not look at every value again.
+    values_are_16_bit: ClassVar[bool] = False
+
+    def __init__(self, name: str, timeout_s: float) -> None:
+        self.name = name
+        self.timeout_s = float(timeout_s)
+        self._lock = asyncio.Lock()
+
+    # ------------------------------------------------------------------ what a backend says
+    @property
+    @abc.abstractmethod
+    def target(self) -> str:
+        """Where the bus goes, for messages (``host:port (tcp)``, ``/dev/ttyUSB0 (19200 baud)``)."""
+
+    @property
+    @abc.abstractmethod
+    def connected(self) -> bool:
+        """Whether requests can be sent now."""
+
+    @property
+    def is_serial_framing(self) -> bool:
+        """True when frames carry no transaction id (RTU): a late answer could be misread."""
+        return False
+
+    @property
+    def quiet_after_send_s(self) -> float:
+        """How long after a request is written no answer can be there yet (s)."""
+        return 0.0
+
+    @abc.abstractmethod
+    async def _connect(self) -> None:
+        """Open the connection; raise ``DeviceConnectionError`` (or ``OSError``) on failure."""
+
+    @abc.abstractmethod
+    async def _close(self) -> None:
+        """Close the connection, if any."""
+
+    @abc.abstractmethod
+    async def _read(self, kind: str, device_id: int, address: int, count: int, what: str) -> Sequence[int]:
+        """Function 4 (``kind`` "input") or 3 ("holding"): the registers the device sent."""
+
+    @abc.abstractmethod
+    async def _write(self, device_id: int, address: int, values: list[int], what: str) -> None:
+        """Function 16: write ``values`` from ``address``."""
+
+    @abc.abstractmethod
+    async def _read_device_identification(self, device_id: int, what: str) -> dict[str, str]:
+        """Function 43/14: identification objects by name (VendorName, ProductCode, ...)."""
+
+    # ------------------------------------------------------------------ template methods
+    async def connect(self) -> None:
+        """Open the connection (or serial port); ``DeviceConnectionError`` on failure."""
+        await self.close()
+        try:
+            await self._connect()
+        except DeviceConnectionError:
+            await self.close()
+            raise
+        except (OSError, ValueError) as exc:
+            await self.close()
+            raise DeviceConnectionError(f"bus {self.name!r}: cannot connect to {self.target}: {exc}") from exc
+        log.info("bus %s: connected to %s", self.name, self.target)
+
+    async def close(self) -> None:
+        """Close the connection; safe to call at any time and more than once."""
+        with contextlib.suppress(Exception):
+            await self._close()
+
+    async def __aenter__(self) -> Transport:
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    async def read_input_registers(self, device_id: int, address: int, count: int) -> list[int]:
+        """Function 4: ``count`` input registers from ``address`` (values 0..65535)."""
+        return await self._read_registers("input", device_id, address, count)
+
+    async def read_holding_registers(self, device_id: int, address: int, count: int) -> list[int]:
+        """Function 3: ``count`` holding registers from ``address``."""
+        return await self._read_registers("holding", device_id, address, count)
+
+    async def _read_registers(self, kind: str, device_id: int, address: int, count: int) -> list[int]:
+        if not (1 <= count <= MAX_READ_COUNT and address >= 0 and address + count <= 0x10000):
+            check_range(address, count, MAX_READ_COUNT)
+        if not 0 <= device_id <= 247:
+            self._check_device_id(device_id)
+        what = f"read {kind} {address}+{count} of device {device_id} on {self.name!r}"
+        async with self._lock:
+            if not self.connected:
+                self._check_connected()
+            try:
+                if self.bounds_own_wait:
+                    registers = await self._read(kind, device_id, address, count, what)
+                else:
+                    async with asyncio.timeout(self.timeout_s):
+                        registers = await self._read(kind, device_id, address, count, what)
+            except GatewayError:
+                raise
+            except Exception as exc:
+                raise self._map_error(what, exc) from exc
+        if len(registers) != count:
+            raise DecodeError(f"{what}: asked for {count} registers, got {len(registers)}")
+        if not self.values_are_16_bit and (min(registers) < 0 or max(registers) > 0xFFFF):
+            raise DecodeError(f"{what}: a register value outside 0..65535")
+        return registers if type(registers) is list else list(registers)
+
+    async def write_registers(
+        self, device_id: int, address: int, values: Sequence[int], allow_write: bool
+    ) -> None:
+        """Function 16. Refused with ``WriteNotAllowedError`` before anything is sent unless
+        the device's configuration allows writes."""
+        if not allow_write:
+            raise WriteNotAllowedError(
+                f"write to registers {address}.. of device {device_id} on bus {self.name!r} refused: "
+                "the device configuration does not set allow_write = true"
+            )
+        regs = [int(v) for v in values]
+        check_range(address, len(regs), MAX_WRITE_COUNT)
+        if any(not 0 <= v <= 0xFFFF for v in regs):
+            raise GatewayError("register values must be in 0..65535")
+        self._check_device_id(device_id)
+        what = f"write {address}+{len(regs)} of device {device_id} on {self.name!r}"
+        await self._call(what, self._write(device_id, address, regs, what))
+
+    async def read_device_identification(self, device_id: int) -> dict[str, str]:
+        """Function 43/14 (regular objects): e.g. VendorName, ProductCode, ModelName."""
+        self._check_device_id(device_id)
+        what = f"read device identification of device {device_id} on {self.name!r}"
+        result = await self._call(what, self._read_device_identification(device_id, what))
+        assert isinstance(result, dict)
+        return result
+
+    async def _call(self, what: str, request: object) -> object:
+        """Run one backend request (a coroutine) under the lock, the timeout and the mapping."""
+        assert asyncio.iscoroutine(request)
+        async with self._lock:
+            try:
+                self._check_connected()
+                if self.bounds_own_wait:
+                    return await request
+                async with asyncio.timeout(self.timeout_s):
+                    return await request
+            except GatewayError:
+                raise
+            except Exception as exc:
+                raise self._map_error(what, exc) from exc
+            finally:
+                request.close()  # never started (not connected): no "never awaited" warning
+
+    # ------------------------------------------------------------------ helpers
+    def _check_connected(self) -> None:
+        if not self.connected:
+            raise DeviceConnectionError(f"bus {self.name!r}: not connected to {self.target}")
+
+    @staticmethod
+    def _check_device_id(device_id: int) -> None:
+        if not 0 <= device_id <= 247:
+            raise GatewayError(f"device id {device_id} outside 0..247")
+
+    def _map_error(self, what: str, exc: BaseException) -> GatewayError:
+        """The typed error for what a backend raised."""
+        if isinstance(exc, TimeoutError):  # before OSError: TimeoutError is one
+            return DeviceTimeoutError(f"{what}: no answer from {self.target} within {self.timeout_s:g} s")
+        if isinstance(exc, ConnectionError | OSError | EOFError):
+            return DeviceConnectionError(f"{what}: connection to {self.target} lost: {exc}")
+        return DecodeError(f"{what}: invalid response from {self.target}: {exc}")

@@ -1,0 +1,127 @@
+"""An in-process Modbus bus for fast tests (after python-can's ``VirtualBus``).
+
+``VirtualTransport`` is a ``Transport`` backend whose devices are register images in memory
+(input and holding registers per device id, and identification objects), changed by the test
+between polls. A fault script decides the outcome of the next requests, so every branch of
+the poll loop runs without sockets and without waiting:
+
+* ``"timeout"``: no answer (raises at once; the template method maps it as a timeout);
+* ``("exception", code)``: the device answers a Modbus exception;
+* ``"garbled"``: bytes that are no valid frame;
+* ``"short"``: an answer with one register too few;
+* ``"disconnect"``: the connection drops (and stays down until ``connect``);
+* ``"ok"``: a normal answer (to script a fault for a later request).
+
+A read of an address that is not in the image answers exception 2 (illegal data address),
+as a real device does; a device id that is not there gives no answer (a timeout).
+``requests`` logs every request in order.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+from ..errors import DecodeError, DeviceConnectionError, DeviceExceptionResponse
+from .transport import EXCEPTION_NAMES, Transport
+
+Fault = str | tuple[str, int]
+FAULTS = ("ok", "timeout", "garbled", "short", "disconnect", "exception")
+
+
+@dataclass
+class VirtualDevice:
+    """The registers of one device: address -> value (0..65535)."""
+
+    input: dict[int, int] = field(default_factory=dict)
+    holding: dict[int, int] = field(default_factory=dict)
+    identification: dict[str, str] = field(default_factory=dict)
+
+    def set_input(self, address: int, values: Iterable[int]) -> None:
+        for k, v in enumerate(values):
+            self.input[address + k] = int(v)
+
+    def set_holding(self, address: int, values: Iterable[int]) -> None:
+        for k, v in enumerate(values):
+            self.holding[address + k] = int(v)
+
+
+class VirtualTransport(Transport):
+    """A bus whose devices live in memory (see the module docstring)."""
+
+    def __init__(
+        self, name: str = "virtual", devices: dict[int, VirtualDevice] | None = None, timeout_s: float = 0.5
+    ) -> None:
+        super().__init__(name, timeout_s)
+        self.devices: dict[int, VirtualDevice] = devices if devices is not None else {}
+        self.requests: list[tuple[str, int, int, int]] = []
+        self.connects = 0
+        self.refuse_connects = 0
+        self._faults: deque[Fault] = deque()
+        self._connected = False
+
+    # ------------------------------------------------------------------ the script
+    def fail_next(self, fault: Fault, times: int = 1) -> None:
+        """The next ``times`` requests get ``fault`` (after those already scripted)."""
+        name = fault if isinstance(fault, str) else fault[0]
+        if name not in FAULTS:
+            raise ValueError(f"unknown fault {fault!r}; one of {', '.join(FAULTS)}")
+        self._faults.extend([fault] * times)
+
+    @property
+    def target(self) -> str:
+        return f"virtual bus {self.name!r}"
+
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    # ------------------------------------------------------------------ primitives
+    async def _connect(self) -> None:
+        self.connects += 1
+        if self.refuse_connects > 0:
+            self.refuse_connects -= 1
+            raise ConnectionRefusedError("connection refused")
+        self._connected = True
+
+    async def _close(self) -> None:
+        self._connected = False
+
+    def _answer(self, kind: str, device_id: int, address: int, count: int, what: str) -> None:
+        """Raise what the scripted fault or the device says instead of an answer."""
+        self.requests.append((kind, device_id, address, count))
+        fault = self._faults.popleft() if self._faults else None
+        if fault == "disconnect":
+            self._connected = False
+            raise DeviceConnectionError(f"{what}: connection to {self.target} lost")
+        if fault == "timeout" or device_id not in self.devices:
+            raise TimeoutError
+        if fault == "garbled":
+            raise DecodeError(f"{what}: garbled answer from {self.target}")
+        if isinstance(fault, tuple):
+            code = fault[1]
+            name = EXCEPTION_NAMES.get(code, "unknown exception")
+            raise DeviceExceptionResponse(f"{what}: device answered exception {code} ({name})", code)
+
+    async def _read(self, kind: str, device_id: int, address: int, count: int, what: str) -> Sequence[int]:
+        short = bool(self._faults) and self._faults[0] == "short"
+        if short:
+            self._faults.popleft()
+        self._answer(kind, device_id, address, count, what)
+        image = self.devices[device_id].input if kind == "input" else self.devices[device_id].holding
+        try:
+            values = [image[a] for a in range(address, address + count)]
+        except KeyError:
+            raise DeviceExceptionResponse(
+                f"{what}: device answered exception 2 (illegal data address)", 2
+            ) from None
+        return values[:-1] if short else values
+
+    async def _write(self, device_id: int, address: int, values: list[int], what: str) -> None:
+        self._answer("write", device_id, address, len(values), what)
+        self.devices[device_id].set_holding(address, values)
+
+    async def _read_device_identification(self, device_id: int, what: str) -> dict[str, str]:
+        self._answer("identification", device_id, 0, 0, what)
+        return dict(self.devices[device_id].identification)
