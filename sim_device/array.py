@@ -20,8 +20,9 @@ Clock
 -----
 Device time is ``speed * (clock() - start)`` seconds. Samples are taken every
 ``sample_period_s`` of device time; the physics is advanced lazily to the current device
-time whenever registers are read (``advance``), integrating creep on the sample grid,
-vectorized over the pending samples. If more than ``MAX_WORK / N`` samples are pending (a
+time whenever registers are read (``advance``), integrating creep on the sample grid in one
+batch for all pending samples (arrays (T, N); only the two-operation Kelvin recurrence steps
+through the samples). If more than ``MAX_WORK / N`` samples are pending (a
 long idle at high speed), the gap is crossed in that many coarser, equal steps so a read
 never stalls; the sample counter still counts every conversion.
 """

@@ -1,4 +1,4 @@
-"""The simulated world: effects beyond the paper, implemented here independently of the model.
+"""The simulated world: effects beyond the paper, written here independently of the gateway.
 
 The paper's physics (tunneling eq. 2-9, Holm contact eq. 10-12, one-Kelvin creep eq. 14-17)
 comes from ``sim_device.sensor.PaperSensor``. The world then modifies the sensor it produced:
@@ -133,7 +133,7 @@ def activation_energy_ev(coeff_per_k: float, reference_c: float = 25.0) -> float
 
 
 class World:
-    """Applies the switched-on world effects to the model's resistance breakdown."""
+    """Applies the switched-on world effects to the paper sensor's resistance (``PaperResistance``)."""
 
     def __init__(
         self, effects: Sequence[str], params: Sequence[SimSensorParams], gamma_s0: FloatArray

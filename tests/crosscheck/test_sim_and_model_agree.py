@@ -5,13 +5,18 @@ recurrences) and the simulator's sensor (``sim_device.sensor.PaperSensor``: the 
 element integrated by Runge-Kutta) are written independently from the paper and
 ``docs/parameters.md``. Where they disagree, the spec table decides.
 
-Tolerances: the spec table to half a unit of its last printed digit; the two codes to
-1e-8 relative in resistance (RK4's error on a 10 ms to 30 s step is below 1e-9 here; an
-error in any equation moves the resistance by far more).
+Tolerances: the spec table to half a unit of its last printed digit (0.04-0.13 % of the
+printed resistances; for the percentages half a unit of their last digit); the two codes to
+1e-8 relative in resistance (measured: at most 8e-12 over the force/hold grid and 6e-13 on
+the load history; the sim's RK4 sub-steps keep its truncation near 1e-10 of the Kelvin
+strain, and an error in any equation moves the resistance by far more). The two read-outs
+give the same counts and resistances except at exact rounding ties, where the gateway's route
+through volts can land one ulp above the tie (one count, see the last test).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -24,13 +29,35 @@ from sim_device.sensor import PaperSensor, SimSensorParams
 PAPER = ("tunneling", "contact", "creep")
 AGREE_REL = 1e-8
 
-#: docs/parameters.md, "What these values give": F (N) -> printed values
-SPEC_TABLE = {
-    0.5: {"r0": "138.5e3", "share": "5.0", "strain": "0.164", "drop": "3.9", "static": "0.549"},
-    1.0: {"r0": "93.8e3", "share": "5.2", "strain": "0.318", "drop": "7.4", "static": None},
-    2.0: {"r0": "46.9e3", "share": "7.3", "strain": "0.599", "drop": "13.1", "static": "2.22"},
-    5.0: {"r0": "9.98e3", "share": "21.8", "strain": "1.273", "drop": "21.6", "static": "5.64"},
-    8.0: {"r0": "3.91e3", "share": "43.9", "strain": "1.771", "drop": "20.3", "static": None},
+#: docs/parameters.md, "What these values give": F (N) -> printed values ("static" is the
+#: naive static inversion after 600 s, "excess" its printed overshoot in %)
+SPEC_TABLE: dict[float, dict[str, str | None]] = {
+    0.5: {
+        "r0": "138.5e3",
+        "share": "5.0",
+        "strain": "0.164",
+        "drop": "3.9",
+        "static": "0.549",
+        "excess": "9.7",
+    },
+    1.0: {"r0": "93.8e3", "share": "5.2", "strain": "0.318", "drop": "7.4", "static": None, "excess": None},
+    2.0: {
+        "r0": "46.9e3",
+        "share": "7.3",
+        "strain": "0.599",
+        "drop": "13.1",
+        "static": "2.22",
+        "excess": "11.1",
+    },
+    5.0: {
+        "r0": "9.98e3",
+        "share": "21.8",
+        "strain": "1.273",
+        "drop": "21.6",
+        "static": "5.64",
+        "excess": "12.8",
+    },
+    8.0: {"r0": "3.91e3", "share": "43.9", "strain": "1.771", "drop": "20.3", "static": None, "excess": None},
 }
 
 
@@ -66,24 +93,30 @@ def sim_static_inversion(resistance_ohm: float) -> float:
 
 @pytest.mark.parametrize("force_n", sorted(SPEC_TABLE))
 def test_both_implementations_give_the_spec_table(force_n: float) -> None:
+    """Each code's own numbers; the naive static inversion of the simulator's crept
+    resistance both by the gateway (``invert_static``) and by bisection on the sim's curve."""
     row = SPEC_TABLE[force_n]
     model = SensorModel(PAPER, SensorParams())
     m0, m600 = model.held_step(force_n, 0.0), model.held_step(force_n, 600.0)
+    s0_total, s0_contact, s0_strain = sim_step(force_n, 0.0)
+    s600_total = sim_step(force_n, 600.0)[0]
+    gateway_static = float(model.invert_static(np.array([s600_total])).force_n[0])
     model_values = {
         "r0": float(m0.total_ohm[0]),
         "share": 100.0 * float(m0.contact_ohm[0] / m0.total_ohm[0]),
         "strain": 100.0 * float(m0.strain[0]),
         "drop": 100.0 * (1.0 - float(m600.total_ohm[0] / m0.total_ohm[0])),
-        "static": float(model.invert_static(m600.total_ohm).force_n[0]),
+        "static": gateway_static,
+        "excess": 100.0 * (gateway_static / force_n - 1.0),
     }
-    s0_total, s0_contact, s0_strain = sim_step(force_n, 0.0)
-    s600_total = sim_step(force_n, 600.0)[0]
+    sim_static = sim_static_inversion(s600_total) if row["static"] else math.nan
     sim_values = {
         "r0": s0_total,
         "share": 100.0 * s0_contact / s0_total,
         "strain": 100.0 * s0_strain,
         "drop": 100.0 * (1.0 - s600_total / s0_total),
-        "static": sim_static_inversion(s600_total) if row["static"] else math.nan,
+        "static": sim_static,
+        "excess": 100.0 * (sim_static / force_n - 1.0),
     }
     for key, printed in row.items():
         if printed is None:
@@ -142,6 +175,8 @@ def test_the_two_codes_agree_on_a_load_history_with_spread_parameters() -> None:
         (10e3, 16, 32768, 10e3 * (65535 / 32768 - 1)),  # 32767.5 -> 32768
         (30e3, 16, 16384, 10e3 * (65535 / 16384 - 1)),  # 16383.75
         (10e3, 12, 2048, 10e3 * (4095 / 2048 - 1)),  # 2047.5 -> 2048
+        (5.09e6, 16, 128, 10e3 * (65535 / 128 - 1)),  # 128.5 -> 128 (half up would give 129)
+        (262.13e6, 16, 2, 10e3 * (65535 / 2 - 1)),  # 2.5 -> 2 (half up would give 3)
         (math.inf, 16, 0, math.inf),  # open
         (0.0, 16, 65535, 0.0),  # short
     ],
@@ -156,3 +191,38 @@ def test_both_read_outs_give_eq_18_by_hand(
     assert float(resistance_from_counts(np.array([counts]), 10e3, bits)[0]) == pytest.approx(
         read_back_ohm, rel=1e-15
     )
+
+
+def test_the_parameter_names_are_the_contract() -> None:
+    """The simulator's parameters are the gateway's by name (less the gateway's inversion
+    range), so a channel's truth converts field by field."""
+    sim_names = list(SimSensorParams().as_dict())
+    gateway_names = [f.name for f in dataclasses.fields(SensorParams)]
+    assert sim_names == [n for n in gateway_names if n not in ("force_min_n", "force_max_n")]
+    converted = SensorParams(**SimSensorParams(r0_ohm=123e3).as_dict())
+    assert converted.r0_ohm == 123e3 and converted.e1_pa == 150e6
+
+
+@pytest.mark.parametrize("bits", [8, 12, 16])
+def test_the_read_outs_agree_away_from_exact_ties(bits: int) -> None:
+    """Two million resistances from 1 ohm to 100 Mohm give the same counts in both codes, and
+    every code reads back to the same resistance (bit for bit)."""
+    divider = Divider(5.0, 10e3, bits)
+    r = np.geomspace(1.0, 1e8, 2_000_001)
+    gateway_counts = divider.counts(divider.output_voltage(r))
+    sim_counts = adc_counts(r, 10e3, bits)
+    assert int(np.count_nonzero(gateway_counts != sim_counts)) == 0
+    codes = np.arange(2**bits, dtype=np.int64)
+    np.testing.assert_array_equal(divider.resistance(codes)[0], resistance_from_counts(codes, 10e3, bits))
+
+
+def test_at_an_exact_tie_the_read_outs_may_differ_by_one_count() -> None:
+    """r = 50 kohm: V_o / V+ = 1/6 and 65535 / 6 = 10922.5 exactly. The simulator rounds the
+    tie to the even 10922. The gateway goes through volts, 5 V x (1/6) / 5 V, which lands one
+    ulp above 1/6 (10922.500000000002) and rounds to 10923. Neither the paper nor the spec
+    defines ties; the difference is one count at a measure-zero set of resistances (reported,
+    not a physics disagreement)."""
+    divider = Divider(5.0, 10e3, 16)
+    assert int(adc_counts(np.array([50e3]), 10e3, 16)[0]) == 10922
+    gateway = int(divider.counts(divider.output_voltage(50e3)))
+    assert gateway in (10922, 10923)

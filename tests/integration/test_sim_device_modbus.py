@@ -2,7 +2,9 @@
 
 No mocks: every test starts a server (port 0, or a pty), reads or writes with an
 ``AsyncModbusTcpClient`` / ``AsyncModbusSerialClient`` / ``AsyncModbusTlsClient`` and
-compares with the model, the scenario and the register map.
+compares with the simulator's own sensor physics (``sim_device.sensor``, run over the whole
+load history at once), eq. 18 by hand, the scenario and the register map. Nothing here
+imports ``gateway``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import pytest
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, AsyncModbusTlsClient
 from pymodbus.exceptions import ModbusException
 from pymodbus.framer import FramerType
+from pymodbus.pdu.mei_message import ReadDeviceInformationResponse
 
 from sim_device import ArrayConfig, LineTiming, Scenario, SimArray, serve_serial, serve_tcp, serve_tls
 from sim_device import registers as reg
@@ -84,12 +87,12 @@ async def snapshot(client: Client, n: int, device_id: int = 1) -> dict[str, np.n
 
 def check_against_model(data: dict[str, np.ndarray | int], array: SimArray) -> None:
     """What the registers say is the array's physics for the scripted load: the true
-    resistance of its sensor model run over the whole history in one go (the server
+    resistance of its paper sensor run over the whole history in one go (the server
     advances it lazily, in pieces), the ADC counts of eq. 18 within the configured noise,
     the float32 block eq. 18 of the counts, the bench force the scenario's."""
     period = array.config.sample_period_s
     counter = int(data["counter"])
-    times = np.arange(counter) * period
+    times = np.asarray(np.arange(counter) * period, dtype=np.float64)
     assert int(data["time_ms"]) == round(times[-1] * 1000.0)
     force = array.scenario.force_n(times)
     r_model = PaperSensor(array.channel_params).run(force, times, 0.0).total_ohm[-1]
@@ -254,12 +257,16 @@ async def test_device_identification_and_unknown_unit() -> None:
     async with serve_tcp(arrays) as server:
         client = await tcp_client(server.port)
         try:
-            info = (await client.read_device_information(read_code=2, device_id=1)).information
+            response = await client.read_device_information(read_code=2, device_id=1)
+            assert isinstance(response, ReadDeviceInformationResponse), response
+            info = response.information
             assert info[0] == b"Tactile Gateway Project" and info[1] == b"TSA-SIM"
             assert info[2] == arrays[0].identity()["MajorMinorRevision"].encode()
             assert info[4] == b"Simulated MIS piezoresistive sensor array"
             assert info[5] == b"Linqstat 3x4"
-            info2 = (await client.read_device_information(read_code=2, device_id=2)).information
+            response = await client.read_device_information(read_code=2, device_id=2)
+            assert isinstance(response, ReadDeviceInformationResponse), response
+            info2 = response.information
             assert info2[5] == b"Linqstat 4x4"
             rr = await client.read_input_registers(0, count=2, device_id=9)
             assert rr.isError() and rr.exception_code == 11

@@ -11,13 +11,14 @@ SIM = Path(__file__).resolve().parents[3] / "sim_device"
 
 
 def _gateway_imports(path: Path) -> list[str]:
-    found = []
+    found: list[str] = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        names = []
         if isinstance(node, ast.Import):
             names = [alias.name for alias in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             names = [node.module]
+        else:
+            continue
         found += [f"{path.name}:{node.lineno} imports {n}" for n in names if n.split(".")[0] == "gateway"]
     return found
 

@@ -268,7 +268,7 @@ def test_identity_and_config_errors() -> None:
     for bad in ({"channels": 0}, {"channels": 300}, {"columns": 17}, {"adc_bits": 20}, {"speed": 0.0},
                 {"supply_v": 30.0}, {"world_effects": ("creep3",)}, {"pitch_mm": 70.0}):  # fmt: skip
         with pytest.raises(ConfigError):
-            ArrayConfig(**bad)  # type: ignore[arg-type]
+            ArrayConfig(**bad)
     with pytest.raises(ValueError, match="device_id"):
         SimArray(ArrayConfig(), device_id=0)
     assert ArrayConfig(world_effects="creep,creep2").world_effects == ("creep2",)  # type: ignore[arg-type]
