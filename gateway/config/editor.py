@@ -1,0 +1,325 @@
+"""The comment-keeping editor of channel settings (``tactile-gateway channels set|enable|disable``).
+
+The file is edited with tomlkit, so the operator's comments and layout stay; the edited text
+is validated with ``parse_config`` before anything is written, and the write is atomic. An
+edit that would make the configuration invalid (or would not take effect) is refused with a
+``ConfigError`` and leaves the file byte for byte as it was. Keys: ``name``, ``x_mm``,
+``y_mm`` (mm), ``enabled``, ``effects`` (comma list), or any sensor parameter (into the
+channel's ``params`` table). ``ParameterSources`` tells where each resolved parameter of a
+channel comes from: default, device, calibration file or channel.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import tomlkit
+from tomlkit.items import AoT, Array, InlineTable, Item, Table
+
+from ..atomic import atomic_write_text
+from ..errors import ConfigError
+from ..model import UnknownEffectError, parameter_names, parse_effects
+from .parser import parse_config
+from .schema import BusConfig, ChannelConfig, DeviceConfig, GatewayConfig
+
+__all__ = [
+    "PLAIN_KEYS",
+    "Assignment",
+    "ChannelTarget",
+    "EditResult",
+    "ParameterSources",
+    "edit_channel",
+    "find_channel",
+    "find_devices",
+    "flag_assignment",
+    "parse_assignment",
+    "read_config_text",
+]
+
+#: Channel keys set directly (the rest are sensor parameters, set in ``params``).
+PLAIN_KEYS = ("name", "x_mm", "y_mm", "enabled", "effects")
+_TRUE = ("true", "yes", "on", "1")
+_FALSE = ("false", "no", "off", "0")
+
+
+@dataclass(frozen=True)
+class ChannelTarget:
+    bus_index: int
+    device_index: int
+    bus: BusConfig
+    device: DeviceConfig
+    channel: ChannelConfig
+
+
+def find_devices(
+    config: GatewayConfig, device_name: str | None
+) -> list[tuple[int, int, BusConfig, DeviceConfig]]:
+    found = [
+        (b, d, bus, dev)
+        for b, bus in enumerate(config.buses)
+        for d, dev in enumerate(bus.devices)
+        if device_name is None or dev.name == device_name
+    ]
+    if device_name is not None and not found:
+        names = [dev.name for _, dev in config.devices()]
+        close = difflib.get_close_matches(device_name, names, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise ConfigError(f"{config.source}: no device {device_name!r}{hint} (devices: {', '.join(names)})")
+    return found
+
+
+def find_channel(config: GatewayConfig, name: str, device_name: str | None) -> ChannelTarget:
+    matches: list[ChannelTarget] = []
+    for b, d, bus, dev in find_devices(config, device_name):
+        for ch in dev.channels:
+            if ch.name == name:
+                matches.append(ChannelTarget(b, d, bus, dev, ch))
+    if len(matches) > 1:
+        devices = ", ".join(t.device.name for t in matches)
+        raise ConfigError(
+            f"{config.source}: channel {name!r} exists in devices {devices}; choose one with --device NAME"
+        )
+    if not matches:
+        names = [ch.name for _, _, _, dev in find_devices(config, device_name) for ch in dev.channels]
+        close = difflib.get_close_matches(name, names, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        scope = f" of device {device_name!r}" if device_name else ""
+        raise ConfigError(
+            f"{config.source}: no channel {name!r}{scope}{hint} (see `tactile-gateway channels list`)"
+        )
+    return matches[0]
+
+
+class ParameterSources:
+    """Where each parameter of a device's channels comes from: default, device, calibration, channel."""
+
+    def __init__(self, text: str, bus_index: int, device_index: int, device: DeviceConfig) -> None:
+        raw: dict[str, Any] = tomllib.loads(text)["bus"][bus_index]["device"][device_index]
+        self.device_keys = list(raw.get("model", {}).get("params", {}))
+        self.channel_keys: dict[int, list[str]] = {}
+        for entry in raw.get("channel", []):
+            self.channel_keys[entry["index"]] = list(entry.get("params", {}))
+        self.calibration: dict[str, Any] = {}
+        if device.calibration is not None:
+            self.calibration = tomllib.loads(device.calibration.read_text(encoding="utf-8")).get(
+                "channel", {}
+            )
+
+    def of(self, channel: ChannelConfig) -> dict[str, str]:
+        sources = dict.fromkeys(parameter_names(), "default")
+        sources.update(dict.fromkeys(self.device_keys, "device"))
+        sources.update(dict.fromkeys(self.calibration.get(channel.name, {}), "calibration"))
+        sources.update(dict.fromkeys(self.channel_keys.get(channel.index, []), "channel"))
+        return sources
+
+
+def _parse_bool(key: str, text: str) -> bool:
+    lowered = text.strip().lower()
+    if lowered in _TRUE:
+        return True
+    if lowered in _FALSE:
+        return False
+    raise ConfigError(f"{key}={text!r}: expected true or false (also yes/no, on/off, 1/0)")
+
+
+def _parse_number(key: str, text: str) -> Item:
+    """A TOML number item; the operator's spelling (``2e5``) is kept when it is valid TOML."""
+    try:
+        value = tomlkit.parse(f"v = {text.strip()}")["v"]
+    except Exception:
+        value = None
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return tomlkit.item(value)
+    try:
+        number = float(text)
+    except ValueError:
+        raise ConfigError(f"{key}={text!r}: expected a number") from None
+    if math.isnan(number):
+        raise ConfigError(f"{key}={text!r}: NaN is not allowed")
+    return tomlkit.item(number)
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """One KEY=VALUE of ``channels set``: the TOML item to write and the value it must load as."""
+
+    key: str
+    item: Item
+    expected: str | bool | float | tuple[str, ...]
+
+
+def parse_assignment(pair: str) -> Assignment:
+    key, sep, text = pair.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError(f"{pair!r} is not KEY=VALUE")
+    allowed = [*PLAIN_KEYS, *parameter_names()]
+    if key not in allowed:
+        close = difflib.get_close_matches(key, allowed, n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        raise ConfigError(
+            f"unknown key {key!r}{hint} "
+            f"(allowed: {', '.join(PLAIN_KEYS)}, or a sensor parameter such as r0_ohm)"
+        )
+    if key == "name":
+        return Assignment(key, tomlkit.item(text.strip()), text.strip())
+    if key == "enabled":
+        flag = _parse_bool(key, text)
+        return Assignment(key, tomlkit.item(flag), flag)
+    if key == "effects":
+        names = [n.strip() for n in text.split(",") if n.strip()]
+        try:
+            canonical = parse_effects(names)
+        except UnknownEffectError as exc:
+            raise ConfigError(f"effects={text!r}: {exc}") from None
+        array = tomlkit.array()
+        array.extend(names)
+        return Assignment(key, array, canonical)
+    item = _parse_number(key, text)
+    return Assignment(key, item, float(item.unwrap()))
+
+
+def _edit_document(
+    document: tomlkit.TOMLDocument, target: ChannelTarget, assignments: Sequence[Assignment]
+) -> None:
+    """Apply the edits to the target's ``[[bus.device.channel]]`` entry, adding one if needed."""
+    device: Any = document["bus"][target.bus_index]["device"][target.device_index]
+    entries = device.get("channel")
+    if entries is not None:
+        for entry in entries:
+            if entry.get("index") == target.channel.index:
+                _apply(entry, assignments)
+                return
+    if isinstance(device, InlineTable) or isinstance(entries, Array):
+        new_inline = tomlkit.inline_table()
+        new_inline["index"] = target.channel.index
+        _apply(new_inline, assignments)
+        if entries is None:
+            array = tomlkit.array()
+            array.append(new_inline)
+            device["channel"] = array
+        else:
+            entries.append(new_inline)
+        return
+    # A complete new table (the blank line after it last) appended as [[bus.device.channel]].
+    table = tomlkit.table()
+    table.add("index", target.channel.index)
+    _apply(table, assignments)
+    table.add(tomlkit.nl())
+    if isinstance(entries, AoT):
+        previous = entries[-1] if len(entries) else None
+        if isinstance(previous, Table) and not previous.as_string().endswith("\n\n"):
+            previous.add(tomlkit.nl())
+        entries.append(table)
+    else:
+        aot = tomlkit.aot()
+        aot.append(table)
+        device.append("channel", aot)
+
+
+def _inline(items: Sequence[tuple[str, str]]) -> InlineTable:
+    body = ", ".join(f"{key} = {value}" for key, value in items)
+    table = tomlkit.parse(f"v = {{ {body} }}\n" if body else "v = {}\n")["v"]
+    assert isinstance(table, InlineTable)
+    return table
+
+
+def _set_param(entry: Any, key: str, value: Item) -> None:
+    params = entry.get("params")
+    if isinstance(params, Table):
+        params[key] = value
+        return
+    if isinstance(params, InlineTable):
+        # Rebuilt so that an added key gets the same "{ a = 1, b = 2 }" spacing; the values keep
+        # their spelling and a comment after the table stays.
+        items = [(k, value.as_string() if k == key else params[k].as_string()) for k in params]
+        if key not in params:
+            items.append((key, value.as_string()))
+        entry["params"] = _inline(items)
+        return
+    entry["params"] = _inline([(key, value.as_string())])
+
+
+def _apply(entry: Any, assignments: Sequence[Assignment]) -> None:
+    for assignment in assignments:
+        if assignment.key in PLAIN_KEYS:
+            entry[assignment.key] = assignment.item
+        else:
+            _set_param(entry, assignment.key, assignment.item)
+
+
+def _took_effect(channel: ChannelConfig, assignment: Assignment) -> bool:
+    """Whether the re-parsed channel shows the edit (a safety net against a misplaced edit)."""
+    key = assignment.key
+    actual = getattr(channel, key) if key in PLAIN_KEYS else getattr(channel.params, key)
+    return bool(actual == assignment.expected)
+
+
+@dataclass(frozen=True)
+class EditResult:
+    """What ``edit_channel`` did: the channel as the edited file now resolves it, and the
+    assignments as written (``changed`` False when the file already said so)."""
+
+    path: Path
+    target: ChannelTarget
+    channel: ChannelConfig
+    changed: bool
+    changes: str
+
+
+def edit_channel(
+    config_path: Path, name: str, device_name: str | None, assignments: Sequence[Assignment]
+) -> EditResult:
+    """Apply ``assignments`` to the channel called ``name`` in the file, keeping every comment
+    and the layout, and write it atomically; or raise ``ConfigError`` and leave the file
+    byte for byte as it was (unreadable or invalid file, unknown channel, an edit that would
+    make the configuration invalid or would not take effect, a failed write)."""
+    text = read_config_text(config_path)
+    config = parse_config(text, source=config_path)
+    target = find_channel(config, name, device_name)
+    document = tomlkit.parse(text)
+    _edit_document(document, target, assignments)
+    new_text = tomlkit.dumps(document)
+    try:
+        edited = parse_config(new_text, source=config_path)
+    except ConfigError as exc:
+        raise ConfigError(
+            f"refused, {config_path} is unchanged: the edit would make the configuration invalid:\n{exc}"
+        ) from None
+    channel = edited.buses[target.bus_index].devices[target.device_index].channels[target.channel.index]
+    wrong = [a.key for a in assignments if not _took_effect(channel, a)]
+    if wrong:
+        raise ConfigError(
+            f"refused, {config_path} is unchanged: the edit of {', '.join(wrong)} did not take effect"
+        )
+    changes = ", ".join(f"{a.key} = {a.item.as_string()}" for a in assignments)
+    if new_text == text:
+        return EditResult(config_path, target, channel, False, changes)
+    try:
+        atomic_write_text(config_path, new_text)
+    except OSError as exc:
+        raise ConfigError(
+            f"{config_path}: cannot write: {exc.strerror or exc}; the file is unchanged"
+        ) from None
+    return EditResult(config_path, target, channel, True, changes)
+
+
+def read_config_text(path: Path) -> str:
+    """The text of a configuration file (``ConfigError`` if unreadable or not UTF-8)."""
+    try:
+        return path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the configuration file: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): TOML files are UTF-8") from None
+
+
+def flag_assignment(enabled: bool) -> Assignment:
+    """``enabled = true`` / ``false``."""
+    return Assignment("enabled", tomlkit.item(enabled), enabled)
