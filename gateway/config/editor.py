@@ -134,7 +134,7 @@ def _parse_number(key: str, text: str) -> Item:
         value = tomlkit.parse(f"v = {text.strip()}")["v"]
     except Exception:
         value = None
-    if isinstance(value, int | float) and not isinstance(value, bool):
+    if isinstance(value, int | float) and not isinstance(value, bool) and not math.isnan(value):
         return tomlkit.item(value)
     try:
         number = float(text)
