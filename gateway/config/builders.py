@@ -14,7 +14,8 @@ from typing import Any
 from ..modbus.register_map import RegisterMap
 from ..model import Divider, SensorParams
 from ..model.effects import PAPER_EFFECTS
-from .parser import ROOT_KEYS, check_unique_names, parse_bus, parse_device, parse_metrics
+from .device import parse_device
+from .parser import ROOT_KEYS, check_unique_names, parse_bus, parse_metrics
 from .schema import DEFAULT_METRICS_PORT, BusConfig, DeviceConfig, GatewayConfig, TlsConfig
 from .tables import Context, Table
 

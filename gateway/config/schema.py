@@ -14,8 +14,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
-from ..modbus.register_map import RegisterMap
-from ..model import Divider, SensorParams
+from ..errors import ConfigError
+from ..modbus.plan import MODBUS_MAX_READ
+from ..modbus.register_map import ENCODINGS, RegisterMap
+from ..model import Divider, SensorParams, UnknownEffectError, parse_effects
+from ..model.params import Interval
 
 __all__ = [
     "BUS_KINDS",
@@ -58,6 +61,45 @@ MAX_CHANNELS: Final = 256
 #: Channel positions must lie within this many millimetres of the origin.
 MAX_POSITION_MM: Final = 10_000.0
 MAX_PITCH_MM: Final = 1_000.0
+
+# The allowed values of the fields, shared by the dataclasses' own checks and the parser.
+DEVICE_ID: Final = (1, 247)
+PORT: Final = (1, 65535)
+RETRIES: Final = (0, 10)
+STOPBITS: Final = (1, 2)
+BYTESIZE: Final = (7, 8)
+TIMEOUT_S: Final = Interval(0.0, 60.0, low_inclusive=False)
+POLL_INTERVAL_S: Final = Interval(0.001, 3600.0, low_inclusive=True)
+BACKOFF_INITIAL_S: Final = Interval(0.0, 60.0, low_inclusive=False)
+BACKOFF_MAX_S: Final = 3600.0
+POSITION_MM: Final = Interval(-MAX_POSITION_MM, MAX_POSITION_MM, low_inclusive=True)
+PITCH_MM: Final = Interval(0.0, MAX_PITCH_MM, low_inclusive=False)
+
+
+def check_integer(where: str, name: str, value: object, low: int, high: int, unit: str = "") -> None:
+    """``ConfigError`` unless ``value`` is an integer in ``low..high``."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(f"{where}: {name}: expected an integer in {low}..{high}{unit}, got {value!r}")
+    if not low <= value <= high:
+        raise ConfigError(f"{where}: {name}: {value} is out of range; allowed: {low}..{high}{unit}")
+
+
+def check_number(where: str, name: str, value: object, interval: Interval, unit: str = "") -> None:
+    """``ConfigError`` unless ``value`` is a number inside ``interval``."""
+    allowed = f"{interval.describe()}{unit}"
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{where}: {name}: expected a number in {allowed}, got {value!r}")
+    if not interval.contains(float(value)):
+        raise ConfigError(f"{where}: {name}: {value!r} is out of range; allowed: {allowed}")
+
+
+def check_choice(where: str, name: str, value: object, choices: tuple[object, ...]) -> None:
+    """``ConfigError`` unless ``value`` is one of ``choices``."""
+    if value not in choices:
+        shown = ", ".join(repr(c) if isinstance(c, str) else str(c) for c in choices)
+        raise ConfigError(f"{where}: {name}: {value!r} is not allowed; allowed: {shown}")
+
+
 DEFAULT_METRICS_HOST: Final = "127.0.0.1"
 DEFAULT_METRICS_PORT: Final = 9830
 
@@ -81,6 +123,11 @@ class MetricsConfig:
     port: int = DEFAULT_METRICS_PORT
     web_config: Path | None = None
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.host, str) or not self.host:
+            raise ConfigError(f"metrics: host: expected a host name or IP address, got {self.host!r}")
+        check_integer("metrics", "port", self.port, *PORT)
+
 
 @dataclass(frozen=True)
 class ChannelConfig:
@@ -93,6 +140,20 @@ class ChannelConfig:
     enabled: bool
     effects: tuple[str, ...]
     params: SensorParams
+
+    def __post_init__(self) -> None:
+        where = f"channel {self.name!r}"
+        check_integer(where, "index", self.index, 0, MAX_CHANNELS - 1)
+        check_number(where, "x_mm", self.x_mm, POSITION_MM, " mm")
+        check_number(where, "y_mm", self.y_mm, POSITION_MM, " mm")
+        try:
+            canonical = parse_effects(self.effects)
+        except UnknownEffectError as exc:
+            raise ConfigError(f"{where}: effects: {exc}") from None
+        if tuple(self.effects) != canonical:
+            raise ConfigError(f"{where}: effects: {self.effects!r} must be in canonical order: {canonical!r}")
+        if not isinstance(self.params, SensorParams):
+            raise ConfigError(f"{where}: params: expected SensorParams, got {type(self.params).__name__}")
 
 
 @dataclass(frozen=True)
@@ -110,6 +171,29 @@ class DeviceConfig:
     columns: int
     pitch_mm: float
     calibration: Path | None
+
+    def __post_init__(self) -> None:
+        where = f"device {self.name!r}"
+        check_integer(where, "device_id", self.device_id, *DEVICE_ID)
+        check_choice(where, "encoding", self.encoding, ENCODINGS)
+        check_integer(where, "channels", self.n_channels, 1, MAX_CHANNELS)
+        check_integer(
+            where, "columns", self.columns, 1, self.n_channels, f" (at most channels = {self.n_channels})"
+        )
+        check_number(where, "pitch_mm", self.pitch_mm, PITCH_MM, " mm")
+        if len(self.channels) != self.n_channels:
+            raise ConfigError(
+                f"{where}: {len(self.channels)} channel entries for channels = {self.n_channels}"
+            )
+        names: set[str] = set()
+        for i, channel in enumerate(self.channels):
+            if channel.index != i:
+                raise ConfigError(
+                    f"{where}: channel {channel.name!r} has index {channel.index}, expected {i}"
+                )
+            if channel.name in names:
+                raise ConfigError(f"{where}: duplicate channel name {channel.name!r}")
+            names.add(channel.name)
 
     def channel(self, name: str) -> ChannelConfig:
         """The channel called ``name`` (``KeyError`` if there is none)."""
@@ -145,6 +229,40 @@ class BusConfig:
     backoff_max_s: float
     devices: tuple[DeviceConfig, ...]
 
+    def __post_init__(self) -> None:
+        where = f"bus {self.name!r}"
+        check_choice(where, "kind", self.kind, BUS_KINDS)
+        if self.kind == "rtu":
+            if not isinstance(self.serial_port, str) or not self.serial_port.strip():
+                raise ConfigError(f"{where}: serial_port: expected a serial device such as /dev/ttyUSB0")
+            check_choice(where, "baudrate", self.baudrate, STANDARD_BAUDRATES)
+            check_choice(where, "parity", self.parity, PARITIES)
+            check_integer(where, "stopbits", self.stopbits, *STOPBITS)
+            check_integer(where, "bytesize", self.bytesize, *BYTESIZE)
+        else:
+            if not isinstance(self.host, str) or not self.host:
+                raise ConfigError(f"{where}: host: expected a host name or IP address, got {self.host!r}")
+            check_integer(where, "port", self.port, *PORT)
+        if (self.kind == "tls") != (self.tls is not None):
+            raise ConfigError(f"{where}: tls: kind 'tls' needs TLS settings, and only it uses them")
+        check_number(where, "timeout_s", self.timeout_s, TIMEOUT_S, " s")
+        check_integer(where, "retries", self.retries, *RETRIES)
+        check_number(where, "poll_interval_s", self.poll_interval_s, POLL_INTERVAL_S, " s")
+        check_integer(where, "max_read_registers", self.max_read_registers, 1, MODBUS_MAX_READ)
+        check_number(where, "backoff_initial_s", self.backoff_initial_s, BACKOFF_INITIAL_S, " s")
+        check_number(
+            where,
+            "backoff_max_s",
+            self.backoff_max_s,
+            Interval(float(self.backoff_initial_s), BACKOFF_MAX_S, low_inclusive=True),
+            " s (>= backoff_initial_s)",
+        )
+        if not self.devices:
+            raise ConfigError(f"{where}: at least one device is required per bus")
+        ids = [d.device_id for d in self.devices]
+        if len(set(ids)) != len(ids):
+            raise ConfigError(f"{where}: duplicate device_id; allowed: 1..247, unique per bus")
+
     @property
     def endpoint(self) -> str:
         """``host:port`` (``[v6]:port``) for network buses, the serial port for ``rtu``."""
@@ -161,6 +279,14 @@ class GatewayConfig:
     metrics: MetricsConfig
     buses: tuple[BusConfig, ...]
     source: Path | None
+
+    def __post_init__(self) -> None:
+        buses = [b.name for b in self.buses]
+        devices = [d.name for b in self.buses for d in b.devices]
+        if len(set(buses)) != len(buses):
+            raise ConfigError("configuration: duplicate bus name; bus names are unique")
+        if len(set(devices)) != len(devices):
+            raise ConfigError("configuration: duplicate device name; device names are unique across the file")
 
     def devices(self) -> tuple[tuple[BusConfig, DeviceConfig], ...]:
         """Every (bus, device) pair, in file order."""

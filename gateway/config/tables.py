@@ -9,6 +9,7 @@ from __future__ import annotations
 import difflib
 import os
 import re
+import tomllib
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
@@ -16,7 +17,17 @@ from typing import Any, Final
 from ..errors import ConfigError
 from ..model.params import Interval
 
-__all__ = ["REQUIRED", "Context", "Required", "Table", "join_key", "show_value", "suggest", "type_name"]
+__all__ = [
+    "REQUIRED",
+    "Context",
+    "Required",
+    "Table",
+    "join_key",
+    "parse_toml",
+    "show_value",
+    "suggest",
+    "type_name",
+]
 
 _NAME_RE: Final = re.compile(r"[a-z0-9_-]{1,32}")
 _NAME_RULE: Final = "a name matching [a-z0-9_-]{1,32}"
@@ -228,3 +239,18 @@ class Table:
                 )
             out.append((f"{self.at(key)}[{i}]", item))
         return out
+
+
+def parse_toml(ctx: Context, text: str, what: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        message = str(exc)
+        found = re.search(r"\s*\(at line (\d+), column (\d+)\)$", message)
+        if found:
+            reason = message[: found.start()]
+            raise ctx.error("", f"invalid TOML at line {found[1]}, column {found[2]}: {reason}") from None
+        if "end of document" in message:
+            line = text.count("\n") + 1
+            raise ctx.error("", f"invalid TOML at line {line} (end of {what}): {message}") from None
+        raise ctx.error("", f"invalid TOML: {message}") from None

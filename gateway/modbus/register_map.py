@@ -14,6 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final, Protocol
 
+from ..errors import ConfigError
+
 __all__ = [
     "BYTE_ORDERS",
     "DEVICE_TIME_ADDRESS",
@@ -57,6 +59,27 @@ class RegisterMap:
     status_address: int | None = 16
     force_reference_address: int | None = None
     temperature_address: int | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("word_order", "byte_order"):
+            if getattr(self, name) not in BYTE_ORDERS:
+                raise ConfigError(
+                    f"register map: {name}: {getattr(self, name)!r} is not allowed; allowed: 'big', 'little'"
+                )
+        for name in (
+            "adc_address",
+            "float_address",
+            "status_address",
+            "force_reference_address",
+            "temperature_address",
+        ):
+            value = getattr(self, name)
+            if value is None and name not in ("adc_address", "float_address"):
+                continue
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_ADDRESS:
+                raise ConfigError(
+                    f"register map: {name}: {value!r} is out of range; allowed: 0..{MAX_ADDRESS}"
+                )
 
 
 class DeviceLayout(Protocol):
