@@ -36,6 +36,8 @@ MIN_SCORE_GAIN = 30.0
 #: Readings above this are open circuits for the zero-force consistency check (a 10 kohm
 #: divider with a 16-bit converter cannot tell 100 Mohm from open).
 OPEN_CIRCUIT_OHM = 1e8
+#: Added to the unloaded rows' mean squared log residual: 1 % in resistance, squared.
+UNLOADED_MSE_FLOOR = 1e-4
 #: The runner-up is "indistinguishable" when it achieves this share of the best gain.
 AMBIGUOUS_SHARE = 0.85
 MAX_FIT_ROWS = 6000
@@ -275,25 +277,34 @@ def _score(
 
 
 def _penalized(fit: FitResult, data: FitData) -> float:
-    """Held-out score, lower is better: n ln(mse) + k ln(n_train).
+    """Held-out score, lower is better: the Gaussian log-likelihood of two groups of rows,
+    each with its own variance, plus a BIC penalty:
+    ``n_l ln(mse_l) + n_u ln(mse_u + UNLOADED_MSE_FLOOR) + k ln(n_train)``.
 
-    The held-out rows include the unloaded ones, compared with both readings capped at the
-    open-circuit level: a model that reads finite where the sensor is open (or the reverse)
-    pays ln(cap / R)^2 for each such row, which is what tells an open contact at rest from a
-    constant series resistance, and a leakage path from an open contact.
+    The loaded rows (``l``) carry the physics. The unloaded rows (``u``) are compared with
+    both readings capped at the open-circuit level: a model that reads finite where the
+    sensor is open (or the reverse) raises ``mse_u``, which is what tells an open contact at
+    rest from a constant series resistance, and a leakage path from an open contact. The two
+    groups have separate variances because one inconsistent unloaded row (a reading taken
+    while the load changed, ln(1e8 / 3e4)^2 = 65) would otherwise swamp the loaded rows'
+    squared residuals of about 1e-4 and hide every improvement of the physics.
     """
-    rows = data.held_out & (data.usable | (data.force_n <= 0.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        measured = np.log(np.minimum(data.resistance_ohm[rows], OPEN_CIRCUIT_OHM))
-        model = np.log(np.minimum(fit.model_ohm[rows], OPEN_CIRCUIT_OHM))
-    res = measured - model
-    res = res[np.isfinite(res)]
-    if res.size == 0:
-        return math.inf
-    mse = float(np.mean(res * res))
-    if mse <= 0:
-        return -math.inf
-    return res.size * math.log(mse) + fit.n_parameters * math.log(max(fit.n_train, 2))
+    score = fit.n_parameters * math.log(max(fit.n_train, 2))
+    loaded = data.held_out & data.usable & (data.force_n > 0.0)
+    unloaded = data.held_out & (data.force_n <= 0.0)
+    for rows, floor in ((loaded, 0.0), (unloaded, UNLOADED_MSE_FLOOR)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            measured = np.log(np.minimum(data.resistance_ohm[rows], OPEN_CIRCUIT_OHM))
+            model = np.log(np.minimum(fit.model_ohm[rows], OPEN_CIRCUIT_OHM))
+        res = measured - model
+        res = res[np.isfinite(res)]
+        if res.size == 0:
+            continue
+        mse = float(np.mean(res * res)) + floor
+        if mse <= 0:
+            return -math.inf
+        score += res.size * math.log(mse)
+    return score
 
 
 def _decide(

@@ -180,3 +180,21 @@ def test_cli_refuses_unknown_effects_and_channels(tmp_path: Path) -> None:
     assert result.exit_code == 2 and "did you mean 'hysteresis'" in result.output
     result = CliRunner().invoke(main, ["discrepancy", str(rec)])
     assert result.exit_code == 2 and "the record has 2 channels" in result.output
+
+
+def test_a_few_torn_unloaded_rows_do_not_hide_the_hidden_effect() -> None:
+    """A reading taken while the load changed (force block read before the step, resistance
+    after: 0 N at 30 kohm) is ln(1e8 / 3e4)^2 = 65 in squared log residual, against about
+    1e-4 for a good row. Scattered through the record, a handful of them must not hide the
+    temperature effect the record carries."""
+    from dataclasses import replace
+
+    channel = world_channel(("temperature",), 1)
+    assert channel.force_n is not None
+    unloaded = np.flatnonzero(channel.force_n <= 0.0)
+    torn = unloaded[:: max(1, unloaded.size // 8)]
+    assert torn.size >= 6
+    resistance = channel.resistance_ohm.copy()
+    resistance[torn] = 3e4
+    report = run_discrepancy(replace(channel, resistance_ohm=resistance), baseline=PAPER)
+    assert report.added == ["temperature"], [s.evidence for s in report.steps]
