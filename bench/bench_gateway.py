@@ -63,7 +63,7 @@ def _device_of(array: SimArray, name: str = "bench") -> DeviceConfig:
         gateway_params(array.channel_params),
         cfg.columns,
         cfg.pitch_mm,
-        divider=Divider(cfg.supply_v, cfg.reference_ohm, cfg.adc_bits),
+        front_end=Divider(cfg.supply_v, cfg.reference_ohm, cfg.adc_bits),
     )
 
 

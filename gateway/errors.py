@@ -35,6 +35,11 @@ class DecodeError(DeviceError):
     """A response could not be decoded (wrong length, garbled frame)."""
 
 
+class DeviceMismatchError(DeviceError):
+    """The device answers, but is not the device the configuration describes (a product
+    id, channel count or identification differs from what the configuration expects)."""
+
+
 class WriteNotAllowedError(GatewayError):
     """A write to a device that the configuration does not allow writes to."""
 

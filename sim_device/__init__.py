@@ -8,8 +8,10 @@ An independent witness of the gateway: it imports nothing of ``gateway``. Its ph
 / TLS servers. What it shares with the gateway are documents: the register map and the
 record format.
 
-The register map is ``docs/register-map.md``; scenarios are described in
-``docs/scenarios.md``.
+The register map is ``docs/register-map.md``; a second, commercial-style map ("rawgrid",
+``docs/register-map-rawgrid.md``, ``ArrayConfig(register_map="rawgrid")``) serves the same
+physics with another wire format and read-out (``maps``, ``rawgrid``). Scenarios are
+described in ``docs/scenarios.md``.
 """
 
 from .array import SampleBatch, SimArray

@@ -7,8 +7,17 @@ gateway: R = 2 R_con(F) + R0 (1 - eps) exp(-gamma s0 eps) with creeping strain
 eps = F/(A E0(F)) + e_kv (eq. 13-17), the Kelvin strain integrated by Runge-Kutta; then the
 world effects of ``sim_device.world``.
 
-Electronics (paper Fig. 4b, eq. 18)
------------------------------------
+Register map
+------------
+``config.register_map`` picks the wire format and read-out board (``sim_device.maps``):
+the default ``docs/register-map.md`` described below, or ``docs/register-map-rawgrid.md``
+(a low-side divider with board leakage, 12-bit counts stored rows bottom-up). Physics,
+scenarios and truth are the same for every map; ``true_force_n`` is always indexed by
+physical channel (row-major, top row first) and ``register_channels`` tells which physical
+channel each ADC register holds.
+
+Electronics (paper Fig. 4b, eq. 18; default map)
+------------------------------------------------
 The sensor r and the fixed resistor R_ref form a divider, ``V_o = R_ref / (R_ref + r) V+``;
 a ratiometric ADC converts ``counts = round(V_o / V+ (2^bits - 1) + noise)``, clipped to the
 rails, with Gaussian noise of ``noise_lsb_rms`` LSB (seeded). The measured resistance is
@@ -29,7 +38,6 @@ never stalls; the sample counter still counts every conversion.
 
 from __future__ import annotations
 
-import importlib.metadata
 import math
 import time
 from collections.abc import Callable
@@ -39,9 +47,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .config import ArrayConfig, check_electronics
-from .electronics import adc_counts, full_scale, resistance_from_counts
 from .faults import CHANNEL_MODES, FaultInjector
-from .registers import Electronics, InputImage, decode_holding_write, holding_image
+from .maps import DeviceMap, make_map
+from .registers import Electronics
 from .scenarios import Scenario
 from .sensor import PaperSensor, SimSensorParams
 from .world import World
@@ -51,17 +59,6 @@ Listener = Callable[["SampleBatch"], None]
 
 #: Bound on samples x channels simulated per catch-up (see the module docstring).
 MAX_WORK = 400_000
-VENDOR_NAME = "Tactile Gateway Project"
-PRODUCT_CODE = "TSA-SIM"
-PRODUCT_NAME = "Simulated MIS piezoresistive sensor array"
-
-
-def package_version() -> str:
-    """The installed project version (``MajorMinorRevision`` of the device identification)."""
-    try:
-        return importlib.metadata.version("tactile-gateway")
-    except importlib.metadata.PackageNotFoundError:
-        return "0.0.0+unknown"
 
 
 @dataclass(frozen=True)
@@ -112,13 +109,8 @@ class SimArray:
         self._sensor = PaperSensor(self._params)
         self._world = World(cfg.world_effects, self._params, self._sensor.gamma_s0)
         self._n = cfg.channels
-        self._electronics = Electronics(
-            adc_bits=cfg.adc_bits,
-            supply_v=float(cfg.supply_v),
-            reference_ohm=float(cfg.reference_ohm),
-            sample_period_s=float(cfg.sample_period_s),
-            noise_lsb_rms=float(cfg.noise_lsb_rms),
-        )
+        self._map: DeviceMap = make_map(cfg)
+        self._electronics = self._map.electronics(cfg)
         self._modes = np.zeros(self._n, dtype=np.int8)
         self._rng = np.random.default_rng([cfg.seed, device_id, 1])
         self.faults = FaultInjector(seed=cfg.seed * 1000 + device_id)
@@ -128,7 +120,6 @@ class SimArray:
         self._wall0 = self._clock()
         self._listeners: list[Listener] = []
         self._version = 0
-        self._image = InputImage(self._n)
         self._image_version = -1
         self._image_words: list[int] = []
         self._counter = 0
@@ -184,15 +175,25 @@ class SimArray:
     def model_name(self) -> str:
         return f"Linqstat {self.layout.rows}x{self.layout.columns}"
 
+    @property
+    def register_map(self) -> DeviceMap:
+        """The wire format and read-out board this array serves (``config.register_map``)."""
+        return self._map
+
     def identity(self) -> dict[str, str]:
         """Device identification objects (Modbus function 43 / MEI 14), by name."""
-        return {
-            "VendorName": VENDOR_NAME,
-            "ProductCode": PRODUCT_CODE,
-            "MajorMinorRevision": package_version(),
-            "ProductName": PRODUCT_NAME,
-            "ModelName": self.model_name,
-        }
+        return self._map.identity()
+
+    def register_channels(self) -> NDArray[np.intp]:
+        """Element k: the physical channel (row-major, top row first; the index of
+        ``true_force_n``) whose ADC count the map stores at the k-th register of its ADC
+        block. The identity for the default map; rows reversed for rawgrid."""
+        return self._map.register_channels()
+
+    def register_position(self, index: int) -> tuple[int, int]:
+        """The physical (row, column) of the k-th register of the ADC block (row 0 on top)."""
+        channel = int(self.register_channels()[index])
+        return divmod(channel, self.layout.columns)
 
     # --------------------------------------------------------------------- truth
     def true_force_n(self) -> FloatArray:
@@ -227,6 +228,8 @@ class SimArray:
         for name, value in changes.items():
             if name not in Electronics.__dataclass_fields__:
                 raise ValueError(f"unknown electronics setting {name!r}")
+            if name in self._map.fixed_electronics:
+                raise ValueError(f"{name} is fixed by the {self._map.name} board")
             checked[name] = check_electronics(name, value)
         self.advance()
         self._apply_electronics(checked)
@@ -299,8 +302,7 @@ class SimArray:
         if self.config.sensor_noise_rel > 0.0:
             sensed_r = true_r * np.exp(self.config.sensor_noise_rel * self._rng.standard_normal(true_r.shape))
         counts = self._convert(sensed_r, modes)
-        e = self._electronics
-        measured = resistance_from_counts(counts, e.reference_ohm, e.adc_bits)
+        measured = self._map.measured_ohm(counts, self._electronics)
         self._counter += conversions
         self._last_t = float(times[-1])
         batch = SampleBatch(self.device_id, times, counts, measured, true_r, force, temperature, modes)
@@ -310,54 +312,31 @@ class SimArray:
             listener(batch)
 
     def _convert(self, true_r: FloatArray, modes: NDArray[np.int8]) -> NDArray[np.int64]:
-        """Divider + ADC (eq. 18): ratiometric counts with Gaussian noise, clipped to the rails."""
+        """The map's divider + ADC: ratiometric counts with Gaussian noise, clipped to the rails."""
         e = self._electronics
         noise: FloatArray | float = 0.0
         if e.noise_lsb_rms > 0.0:
             noise = e.noise_lsb_rms * self._rng.standard_normal(true_r.shape)
-        counts = adc_counts(true_r, e.reference_ohm, e.adc_bits, noise)
-        counts[modes == CHANNEL_MODES["open"]] = 0
-        counts[modes == CHANNEL_MODES["short"]] = full_scale(e.adc_bits)
-        return counts
+        return self._map.convert(true_r, modes, e, noise)
 
     # ----------------------------------------------------------------- registers
     def input_registers(self) -> list[int]:
-        """Input registers 0 .. 2200+2N-1 after advancing to now (see docs/register-map.md)."""
+        """The map's input registers from address 0 after advancing to now (default map:
+        0 .. 2200+2N-1, docs/register-map.md; rawgrid: 0 .. 32+N-1)."""
         self.advance()
         if self._image_version != self._version:
-            b = self._last_batch
-            counts = b.adc_counts[0]
-            modes = b.modes[0]
-            fs = full_scale(self._electronics.adc_bits)
-            normal = modes == CHANNEL_MODES["normal"]
-            self._image_words = self._image.update(
-                sample_counter=self._counter,
-                device_time_ms=round(self._last_t * 1000.0),
-                open_=modes == CHANNEL_MODES["open"],
-                short=modes == CHANNEL_MODES["short"],
-                saturated=normal & ((counts <= 1) | (counts >= fs - 1)),
-                adc_counts=counts,
-                resistance_ohm=b.resistance_ohm[0],
-                true_force_n=b.force_n[0],
-                temperature_c=b.temperature_c[0],
-                true_resistance_ohm=b.true_resistance_ohm[0],
-            )
+            self._image_words = self._map.input_image(self._last_batch, self._counter, self._electronics)
             self._image_version = self._version
         return self._image_words
 
     def holding_registers(self) -> list[int]:
-        """Holding registers 0 .. 100+N-1 with the current configuration."""
-        return holding_image(
-            self._n,
-            self.layout.columns,
-            round(self.layout.pitch_mm * 1000.0),
-            self._electronics,
-            self._modes,
-        )
+        """Holding registers with the current configuration (default map: 0 .. 100+N-1;
+        rawgrid has none: empty)."""
+        return self._map.holding_image(self._electronics, self._modes)
 
     def write_holding(self, address: int, values: list[int]) -> None:
         """Apply a Modbus write of holding registers, or raise ``RegisterWriteError`` (no change)."""
-        change = decode_holding_write(self.holding_registers(), self._n, address, values)
+        change = self._map.decode_write(self.holding_registers(), address, values)
         self.advance()
         self._apply_electronics(dict(change.electronics))
         for channel, code in change.modes.items():

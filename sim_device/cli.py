@@ -6,6 +6,7 @@ Examples::
     tactile-sim run --rtu /dev/ttyUSB0 --baud 19200 --device-ids 1,2,3 --world-effects creep2
     tactile-sim run --rtu-tcp 127.0.0.1:5021 --scenario my_protocol.toml --record out.csv
     tactile-sim run --tls 0.0.0.0:802 --cert server.crt --key server.key
+    tactile-sim run --map rawgrid --channels 36 --tcp 127.0.0.1:5022
     tactile-sim scenarios
 
 SIGINT and SIGTERM stop the server cleanly (a recording is closed as a valid file).
@@ -25,7 +26,14 @@ from pathlib import Path
 import click
 
 from .array import SimArray
-from .config import WORLD_EFFECTS, ArrayConfig, ConfigError, parse_world_effects
+from .config import (
+    DEFAULT_BOARD_LEAKAGE_OHM,
+    REGISTER_MAPS,
+    WORLD_EFFECTS,
+    ArrayConfig,
+    ConfigError,
+    parse_world_effects,
+)
 from .faults import FaultError
 from .modbus_server import ServerStartError, SimServer, serve_serial, serve_tcp, serve_tls
 from .record import Recorder, array_metadata
@@ -140,6 +148,21 @@ def scenarios_cmd() -> None:
 )
 @click.option("--sample-period", type=float, default=0.01, show_default=True, help="ADC sample period, s.")
 @click.option(
+    "--map",
+    "register_map",
+    type=click.Choice(REGISTER_MAPS),
+    default=REGISTER_MAPS[0],
+    show_default=True,
+    help="Register map: docs/register-map.md or docs/register-map-rawgrid.md.",
+)
+@click.option(
+    "--board-leakage-ohm",
+    type=float,
+    default=DEFAULT_BOARD_LEAKAGE_OHM,
+    show_default=True,
+    help="rawgrid only: board leakage in parallel with each sensor, ohm (inf: none).",
+)
+@click.option(
     "--record", "record_path", type=click.Path(dir_okay=False), help="Write a measurement record CSV."
 )
 @click.option("--record-period", type=float, default=0.1, show_default=True, help="Record row period, s.")
@@ -168,6 +191,8 @@ def run_cmd(
     noise_lsb: float,
     sensor_noise: float,
     sample_period: float,
+    register_map: str,
+    board_leakage_ohm: float,
     record_path: str | None,
     record_period: float,
     stop_after: float | None,
@@ -196,6 +221,8 @@ def run_cmd(
             world_effects=effects,
             param_spread=not no_spread,
             sample_period_s=sample_period,
+            register_map=register_map,
+            board_leakage_ohm=board_leakage_ohm,
         )
         loaded = Scenario.load(scenario, base.layout)
         config = base.with_changes(scenario=loaded)
@@ -262,10 +289,12 @@ async def _serve(
             where = t.device if t.kind == "rtu" else f"{server.host}:{server.port}"
             ids = ",".join(str(a.device_id) for a in arrays)
             scenario = arrays[0].scenario
+            register_map = arrays[0].config.register_map
+            map_note = "" if register_map == REGISTER_MAPS[0] else f", map {register_map}"
             click.echo(
                 f"tactile-sim: serving {len(arrays)} array(s) of {arrays[0].n_channels} channels "
                 f"(device ids {ids}) on {t.kind} {where}; scenario {scenario.name}, "
-                f"speed {arrays[0].config.speed:g}",
+                f"speed {arrays[0].config.speed:g}{map_note}",
                 err=True,
             )
             sys.stderr.flush()

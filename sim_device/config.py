@@ -64,6 +64,15 @@ ELECTRONICS_LIMITS: dict[str, tuple[float, float]] = {
 }
 
 
+#: The register maps the simulator serves: ``docs/register-map.md`` (the default) and
+#: ``docs/register-map-rawgrid.md`` (``sim_device.maps``, ``sim_device.rawgrid``).
+REGISTER_MAPS: tuple[str, ...] = ("tactile-sim", "rawgrid")
+#: The rawgrid board's fixed read-out: 12-bit ADC, 3.3 V rail, 10 kohm pull-up.
+RAWGRID_BOARD: dict[str, float] = {"adc_bits": 12, "supply_v": 3.3, "reference_ohm": 10e3}
+#: Default board leakage of the rawgrid read-out, in parallel with each sensor (ohm).
+DEFAULT_BOARD_LEAKAGE_OHM = 195e3
+
+
 class ConfigError(ValueError):
     """An array configuration value is invalid; the message names the field."""
 
@@ -106,6 +115,12 @@ class ArrayConfig:
     built for the same channel count. ``speed`` scales the device clock (60 plays a minute
     per wall-clock second). The electronics fields are the start values of the writable
     holding registers.
+
+    ``register_map`` picks the wire format and read-out board (``REGISTER_MAPS``). The
+    ``"rawgrid"`` board fixes its own read-out (``RAWGRID_BOARD``): there ``adc_bits``,
+    ``supply_v`` and ``reference_ohm`` must keep their defaults or equal the board's values,
+    and are not used; ``board_leakage_ohm`` (+inf: none) shunts each of its sensors and
+    must keep its default with the default map, which has no such path.
     """
 
     channels: int = 16
@@ -125,6 +140,8 @@ class ArrayConfig:
     supply_v: float = 5.0
     reference_ohm: float = 10e3
     adc_bits: int = 16
+    register_map: str = "tactile-sim"
+    board_leakage_ohm: float = DEFAULT_BOARD_LEAKAGE_OHM
 
     def __post_init__(self) -> None:
         if (
@@ -163,6 +180,7 @@ class ArrayConfig:
             check_electronics(name, getattr(self, name))
         object.__setattr__(self, "world_effects", parse_world_effects(self.world_effects))
         object.__setattr__(self, "adc_bits", int(self.adc_bits))
+        self._check_register_map()
         if isinstance(self.scenario, Scenario):
             if self.scenario.n_channels != self.channels:
                 raise ConfigError(
@@ -183,6 +201,25 @@ class ArrayConfig:
             if len(items) != self.channels or not all(isinstance(p, SimSensorParams) for p in items):
                 raise ConfigError(f"channel_params must be one SimSensorParams or {self.channels} of them")
             object.__setattr__(self, "channel_params", tuple(items))
+
+    def _check_register_map(self) -> None:
+        if self.register_map not in REGISTER_MAPS:
+            raise ConfigError(
+                f"register_map = {self.register_map!r} must be one of {', '.join(REGISTER_MAPS)}"
+            )
+        leak = self.board_leakage_ohm
+        if isinstance(leak, bool) or not isinstance(leak, int | float) or not leak > 0.0:
+            raise ConfigError(f"board_leakage_ohm = {leak!r} must be > 0 (inf: no leakage)")
+        object.__setattr__(self, "board_leakage_ohm", float(leak))
+        if self.register_map == "tactile-sim" and leak != DEFAULT_BOARD_LEAKAGE_OHM:
+            raise ConfigError("board_leakage_ohm applies to the rawgrid map only")
+        if self.register_map == "rawgrid":
+            for name, board in RAWGRID_BOARD.items():
+                value = getattr(self, name)
+                if value not in (board, ArrayConfig.__dataclass_fields__[name].default):
+                    raise ConfigError(
+                        f"{name} = {value!r}: the rawgrid board's read-out is fixed ({name} = {board:g})"
+                    )
 
     @property
     def layout(self) -> ArrayLayout:

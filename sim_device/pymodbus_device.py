@@ -2,7 +2,9 @@
 
 Each ``SimArray`` becomes a pymodbus ``SimDevice`` with non-shared blocks (holding and input
 registers are separate address spaces) and an ``action`` callback that refreshes the
-registers from the array on every access and validates configuration writes.
+registers from the array on every access and validates configuration writes. The blocks
+are those of the array's register map (``sim_device.maps``); a map without holding
+registers gets a placeholder block that the callback refuses (exception 2), as the bit blocks.
 """
 
 from __future__ import annotations
@@ -12,37 +14,30 @@ from pymodbus.simulator import DataType, SimData, SimDevice
 
 from . import registers as reg
 from .array import SimArray
+from .maps import Block, TactileSimMap
 
 _BIT_FUNCTIONS = frozenset({1, 2, 5, 15})
 _INPUT_FUNCTIONS = frozenset({4})
 
 
-def _register_blocks(n_channels: int, columns: int, pitch_um: int) -> tuple[list[SimData], list[SimData]]:
-    """Holding and input register blocks of the map, with their data types and RO flags."""
-    holding = [
-        SimData(reg.HR_CHANNEL_COUNT, values=n_channels, datatype=DataType.UINT16, readonly=True),
-        SimData(reg.HR_ADC_BITS, values=16, datatype=DataType.UINT16),
-        SimData(reg.HR_SUPPLY_V, values=5.0, datatype=DataType.FLOAT32),
-        SimData(reg.HR_REFERENCE_OHM, values=10e3, datatype=DataType.FLOAT32),
-        SimData(reg.HR_SAMPLE_PERIOD_S, values=0.01, datatype=DataType.FLOAT32),
-        SimData(reg.HR_NOISE_LSB_RMS, values=2.0, datatype=DataType.FLOAT32),
-        SimData(reg.HR_GRID_COLUMNS, values=columns, datatype=DataType.UINT16, readonly=True),
-        SimData(reg.HR_PITCH_UM, values=pitch_um, datatype=DataType.UINT16, readonly=True),
-        SimData(reg.HR_CHANNEL_MODE, count=n_channels, values=0, datatype=DataType.UINT16),
-    ]
-    words = 2 * n_channels
-    inputs = [
-        SimData(reg.IR_SAMPLE_COUNTER, values=0, datatype=DataType.UINT32),
-        SimData(reg.IR_DEVICE_TIME_MS, values=0, datatype=DataType.UINT64),
-        SimData(reg.IR_STATUS_SUMMARY, values=0, datatype=DataType.UINT16),
-        SimData(reg.IR_OPEN_BITMAP, count=3 * reg.BITMAP_WORDS, values=0, datatype=DataType.UINT16),
-        SimData(reg.IR_ADC_COUNTS, count=n_channels, values=0, datatype=DataType.UINT16),
-        SimData(reg.IR_RESISTANCE, count=words, values=0, datatype=DataType.REGISTERS),
-        SimData(reg.IR_TRUE_FORCE, count=words, values=0, datatype=DataType.REGISTERS),
-        SimData(reg.IR_TEMPERATURE, count=words, values=0, datatype=DataType.REGISTERS),
-        SimData(reg.IR_TRUE_RESISTANCE, count=words, values=0, datatype=DataType.REGISTERS),
-    ]
-    return holding, inputs
+_DATATYPES = {
+    "uint16": DataType.UINT16,
+    "uint32": DataType.UINT32,
+    "uint64": DataType.UINT64,
+    "float32": DataType.FLOAT32,
+    "registers": DataType.REGISTERS,
+}
+
+
+def _simdata(blocks: list[Block]) -> list[SimData]:
+    """pymodbus data for a map's blocks (an empty list: a placeholder register the action refuses)."""
+    if not blocks:
+        return [SimData(0, values=0, datatype=DataType.UINT16)]
+    data = []
+    for b in blocks:
+        kind = _DATATYPES[b.datatype]
+        data.append(SimData(b.address, count=b.count, values=b.value, datatype=kind, readonly=b.readonly))
+    return data
 
 
 def _bit_block() -> list[SimData]:
@@ -56,8 +51,10 @@ class Binding:
     def __init__(self, array: SimArray) -> None:
         self.array = array
         self._input_image: list[int] | None = None
-        pitch_um = round(array.layout.pitch_mm * 1000.0)
-        holding, inputs = _register_blocks(array.n_channels, array.layout.columns, pitch_um)
+        device_map = array.register_map
+        self._has_holding = bool(device_map.holding_blocks())
+        holding = _simdata(device_map.holding_blocks())
+        inputs = _simdata(device_map.input_blocks())
         self.device = SimDevice(
             id=array.device_id,
             simdata=(_bit_block(), _bit_block(), holding, inputs),
@@ -82,6 +79,8 @@ class Binding:
                 registers[-start_address : len(image) - start_address] = image
                 self._input_image = image
             return None
+        if not self._has_holding:
+            return ExcCodes.ILLEGAL_ADDRESS
         if set_values:
             try:
                 self.array.write_holding(address, [int(v) for v in set_values])
@@ -94,6 +93,7 @@ class Binding:
 
 
 def static_device(n_channels: int, device_id: int = 1, columns: int = 4) -> SimDevice:
-    """A plain pymodbus device with the same register layout and static values (a baseline)."""
-    holding, inputs = _register_blocks(n_channels, columns, 2500)
+    """A plain pymodbus device with the default map's layout and static values (a baseline)."""
+    device_map = TactileSimMap(n_channels, columns, 2500)
+    holding, inputs = _simdata(device_map.holding_blocks()), _simdata(device_map.input_blocks())
     return SimDevice(id=device_id, simdata=(_bit_block(), _bit_block(), holding, inputs))

@@ -95,6 +95,18 @@ def array_metadata(array: SimArray, record_period_s: float) -> dict[str, object]
         "noise_lsb_rms": f"{e.noise_lsb_rms:g}",
         "supply_v": f"{e.supply_v:g}",
         "reference_ohm": f"{e.reference_ohm:g}",
+        **_map_metadata(cfg),
+    }
+
+
+def _map_metadata(cfg: ArrayConfig) -> dict[str, object]:
+    """The register map and read-out, named only when not the default (whose records stay as they were)."""
+    if cfg.register_map == "tactile-sim":
+        return {}
+    return {
+        "register_map": cfg.register_map,
+        "readout": "low-side divider, pull-up reference_ohm from supply_v",
+        "board_leakage_ohm": f"{cfg.board_leakage_ohm:g}",
     }
 
 

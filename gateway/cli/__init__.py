@@ -10,6 +10,8 @@ from .discrepancy_cmd import discrepancy_cmd
 from .model_cmd import model
 from .record_cmd import paper, record
 from .run_cmd import demo, poll_once, run
+from .scan_cmd import scan
+from .tare_cmd import tare
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -28,5 +30,7 @@ main.add_command(poll_once)
 main.add_command(demo)
 main.add_command(record)
 main.add_command(paper)
+main.add_command(tare)
+main.add_command(scan)
 
 __all__ = ["main"]

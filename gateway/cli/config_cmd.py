@@ -66,7 +66,77 @@ def _load(path: Path) -> tuple[str, GatewayConfig]:
 
 
 def _plural(n: int, word: str) -> str:
-    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+    if n == 1:
+        return f"{n} {word}"
+    return f"{n} {word}es" if word.endswith(("s", "x")) else f"{n} {word}s"
+
+
+def _grid(dev: DeviceConfig) -> list[str]:
+    """The channels drawn where the gateway places them: channel indices by drawn row (row 0
+    at the top), '.' where no channel sits; only for grids up to 32 columns."""
+    layout = dev.layout
+    if layout.columns > 32:
+        return [f"    ({layout.columns} columns: too wide to draw)"]
+    cells: dict[tuple[int, int], str] = {}
+    off: list[str] = []
+    for ch in dev.channels:
+        col = round(ch.x_mm / layout.pitch_x_mm)
+        row = round(ch.y_mm / layout.pitch_y_mm)
+        exact = math.isclose(col * layout.pitch_x_mm, ch.x_mm, abs_tol=1e-6) and math.isclose(
+            row * layout.pitch_y_mm, ch.y_mm, abs_tol=1e-6
+        )
+        if exact and 0 <= row < layout.rows and 0 <= col < layout.columns and (row, col) not in cells:
+            cells[(row, col)] = str(ch.index) if ch.enabled else f"({ch.index})"
+        else:
+            off.append(
+                f"    channel {ch.index} ({ch.name}) at x = {ch.x_mm:g} mm, y = {ch.y_mm:g} mm: off the grid"
+            )
+    width = max([len(v) for v in cells.values()] + [1])
+    lines = [
+        "    " + " ".join(cells.get((row, col), ".").rjust(width) for col in range(layout.columns))
+        for row in range(layout.rows)
+    ]
+    return lines + off
+
+
+def _device_lines(dev: DeviceConfig) -> list[str]:
+    """What the gateway will assume of a device: where its settings come from, the clock, the
+    checks at connect, the read-out circuit, the zero baselines and the layout."""
+    out = []
+    if dev.profile:
+        out.append(f"    map, front end and layout from {dev.profile}, with the device table's overrides")
+    clock = dev.registers.clock
+    if clock is None:
+        out.append("    clock: the host's monotonic clock (the map names no device clock)")
+    else:
+        bits = 16 * clock.registers
+        out.append(
+            f"    clock: {clock.table} {clock.address}..{clock.address + clock.registers - 1}, "
+            f"{bits}-bit counter of {clock.unit}; the host clock takes over if it stalls or goes back"
+        )
+    for check in dev.checks.registers:
+        out.append(
+            f"    check at connect: {check.what} = {check.value} (0x{check.value:04X}) "
+            f"in {check.table} register {check.address}"
+        )
+    for key, value in dev.checks.identification:
+        out.append(f"    check at connect: identification {key} = {value!r} (FC 43/14)")
+    if dev.encoding == "adc":
+        out.append(f"    front end: {dev.front_end.describe()}")
+    tared = [ch for ch in dev.channels if ch.baseline_ohm is not None]
+    if tared:
+        values = [ch.baseline_ohm for ch in tared if ch.baseline_ohm is not None]
+        out.append(
+            f"    zero: {len(tared)} channel(s) with an unloaded baseline, "
+            f"{min(values):.4g}..{max(values):.4g} ohm (read at the baseline: 0 N, no contact)"
+        )
+    else:
+        out.append(
+            "    zero: no baselines (an unloaded channel must read the model's own R(0 N); see `tare`)"
+        )
+    out.append(f"    layout: {dev.layout.describe()}; channel indices as drawn:")
+    out.extend(_grid(dev))
+    return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -119,6 +189,8 @@ def check_config(config_path: Path) -> None:
                     f"    {req.kind} {req.address}..{req.end} ({_plural(req.count, 'register')}): "
                     f"{', '.join(req.purpose)}"
                 )
+            for line in _device_lines(dev):
+                click.echo(line)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -119,8 +119,8 @@ async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, objec
     creep_path, stair_path = out_dir / "creep_tests.csv", out_dir / "staircase.csv"
     async with serve_tcp([creep, stair], host="127.0.0.1", port=0) as sim:
         devices = [
-            device_config_for("creep", 1, creep_params, 1, 2.5, divider=divider, registers=bench),
-            device_config_for("staircase", 2, stair_params, 1, 2.5, divider=divider, registers=bench),
+            device_config_for("creep", 1, creep_params, 1, 2.5, front_end=divider, registers=bench),
+            device_config_for("staircase", 2, stair_params, 1, 2.5, front_end=divider, registers=bench),
         ]
         bus = bus_config_for("sim", "tcp", devices, host="127.0.0.1", port=sim.port, poll_interval_s=0.02)
         config = gateway_config_for([bus])

@@ -292,7 +292,7 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
     try:
         async with serve_tcp([array], host="127.0.0.1", port=0) as sim:
             device = device_config_for(
-                "demo", 1, gateway_params(array.channel_params), 4, 2.5, divider=divider
+                "demo", 1, gateway_params(array.channel_params), 4, 2.5, front_end=divider
             )
             bus = bus_config_for(
                 "sim", "tcp", [device], host="127.0.0.1", port=sim.port, poll_interval_s=0.05

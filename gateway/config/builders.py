@@ -8,11 +8,12 @@ parser checks, so a configuration made in code is validated exactly as one read 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from ..modbus.register_map import RegisterMap
-from ..model import Divider, SensorParams
+from ..modbus.register_map import DeviceClock, RegisterMap
+from ..model import Divider, FrontEnd, SensorParams
 from ..model.effects import PAPER_EFFECTS
 from .device import parse_device
 from .parser import ROOT_KEYS, check_unique_names, parse_bus, parse_metrics
@@ -23,9 +24,30 @@ __all__ = ["bus_config_for", "device_config_for", "gateway_config_for"]
 
 
 # --------------------------------------------------------------------------- built in code
-def _tables_of(value: object) -> dict[str, Any]:
-    """A frozen dataclass as the TOML table the parser reads (None addresses as -1)."""
-    return {k: (-1 if v is None else v) for k, v in vars(value).items()}
+def _registers_table(registers: RegisterMap) -> dict[str, Any]:
+    """A register map as the ``registers`` table the parser reads (None addresses as -1)."""
+    return {k: (-1 if v is None else v) for k, v in vars(registers).items() if k != "clock"}
+
+
+def _clock_value(clock: DeviceClock | None) -> object:
+    if clock is None:
+        return "host"
+    return {
+        "address": clock.address,
+        "registers": clock.registers,
+        "tick_s": clock.tick_s,
+        "table": clock.table,
+    }
+
+
+def _front_end_table(front_end: FrontEnd) -> dict[str, Any]:
+    """A front end as the ``front_end`` table the parser reads."""
+    table: dict[str, Any] = {"kind": front_end.kind}
+    for f in fields(front_end):  # type: ignore[arg-type]
+        value = getattr(front_end, f.name)
+        if value is not None and f.name != "kind":
+            table[f.name] = value
+    return table
 
 
 def device_config_for(
@@ -36,7 +58,7 @@ def device_config_for(
     pitch_mm: float,
     *,
     encoding: str = "adc",
-    divider: Divider | None = None,
+    front_end: FrontEnd | None = None,
     effects: Sequence[str] = PAPER_EFFECTS,
     registers: RegisterMap | None = None,
     allow_write: bool = False,
@@ -54,8 +76,9 @@ def device_config_for(
         "columns": columns,
         "pitch_mm": float(pitch_mm),
         "allow_write": allow_write,
-        "registers": _tables_of(registers or RegisterMap()),
-        "divider": _tables_of(divider or Divider()),
+        "registers": _registers_table(registers or RegisterMap()),
+        "clock": _clock_value((registers or RegisterMap()).clock),
+        "front_end": _front_end_table(front_end or Divider()),
         "model": {"effects": list(effects)},
         "channel": [
             {"index": i, "params": {k: v for k, v in vars(p).items() if v != defaults[k]}}

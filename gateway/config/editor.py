@@ -323,3 +323,66 @@ def read_config_text(path: Path) -> str:
 def flag_assignment(enabled: bool) -> Assignment:
     """``enabled = true`` / ``false``."""
     return Assignment("enabled", tomlkit.item(enabled), enabled)
+
+
+def _number_array(values: Sequence[float], per_line: int) -> Array:
+    """A TOML array of numbers, ``per_line`` to a line (one grid row), integers as integers."""
+    shown = []
+    for v in values:
+        if math.isinf(v):
+            shown.append("inf")
+        elif float(v).is_integer():
+            shown.append(str(int(v)))
+        else:
+            shown.append(repr(float(v)))
+    width = max(len(s) for s in shown)
+    rows = [
+        "    " + ", ".join(s.rjust(width) for s in shown[i : i + per_line]) + ","
+        for i in range(0, len(shown), per_line)
+    ]
+    array = tomlkit.parse("v = [\n" + "\n".join(rows) + "\n]\n")["v"]
+    assert isinstance(array, Array)
+    return array
+
+
+def set_device_array(
+    config_path: Path,
+    device_name: str,
+    key: str,
+    values: Sequence[float],
+    replaces: Sequence[str] = (),
+    comment: str | None = None,
+) -> DeviceConfig:
+    """Set the device-table key ``key`` of device ``device_name`` to the array ``values``
+    (one grid row per line; the keys in ``replaces`` are removed), keeping every comment and
+    the layout; validate and write atomically. Returns the device as the edited file resolves
+    it; ``ConfigError`` leaves the file byte for byte as it was."""
+    text = read_config_text(config_path)
+    config = parse_config(text, source=config_path)
+    ((b, d, _, device),) = find_devices(config, device_name)
+    document = tomlkit.parse(text)
+    table: Any = document["bus"][b]["device"][d]
+    for old in replaces:
+        if old in table:
+            del table[old]
+    array = _number_array(values, max(1, device.columns))
+    if comment is not None:
+        array.comment(comment)
+    if key in table or isinstance(table, InlineTable):
+        table[key] = array
+    else:
+        table.add(key, array)  # tomlkit puts a plain key before the device's sub-tables
+    new_text = tomlkit.dumps(document)
+    try:
+        edited = parse_config(new_text, source=config_path)
+    except ConfigError as exc:
+        raise ConfigError(
+            f"refused, {config_path} is unchanged: the edit would make the configuration invalid:\n{exc}"
+        ) from None
+    try:
+        atomic_write_text(config_path, new_text)
+    except OSError as exc:
+        raise ConfigError(
+            f"{config_path}: cannot write: {exc.strerror or exc}; the file is unchanged"
+        ) from None
+    return edited.buses[b].devices[d]

@@ -16,9 +16,12 @@ from typing import Final
 
 from ..errors import ConfigError
 from ..modbus.plan import MODBUS_MAX_READ
-from ..modbus.register_map import ENCODINGS, RegisterMap
-from ..model import Divider, SensorParams, UnknownEffectError, parse_effects
+from ..modbus.register_map import ENCODINGS, DeviceChecks, RegisterMap
+from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
 from ..model.params import Interval
+from .layout import GridLayout
+
+NO_CHECKS: Final = DeviceChecks()
 
 __all__ = [
     "BUS_KINDS",
@@ -140,9 +143,17 @@ class ChannelConfig:
     enabled: bool
     effects: tuple[str, ...]
     params: SensorParams
+    #: the resistance this channel reads unloaded (ohm; ``tare``), or None: the model's own
+    baseline_ohm: float | None = None
 
     def __post_init__(self) -> None:
         where = f"channel {self.name!r}"
+        if self.baseline_ohm is not None and not (
+            isinstance(self.baseline_ohm, float | int) and 0.0 < self.baseline_ohm <= float("inf")
+        ):
+            raise ConfigError(
+                f"{where}: baseline_ohm: {self.baseline_ohm!r} is out of range; allowed: (0, inf] ohm"
+            )
         check_integer(where, "index", self.index, 0, MAX_CHANNELS - 1)
         check_number(where, "x_mm", self.x_mm, POSITION_MM, " mm")
         check_number(where, "y_mm", self.y_mm, POSITION_MM, " mm")
@@ -158,29 +169,37 @@ class ChannelConfig:
 
 @dataclass(frozen=True)
 class DeviceConfig:
-    """One sensor array on a bus; ``channels`` holds all ``n_channels`` channels in index order."""
+    """One sensor array on a bus; ``channels`` holds all ``n_channels`` channels in index order.
+
+    ``registers`` is what is read (nothing else is), ``checks`` what is verified at connect,
+    ``front_end`` the read-out circuit that turns ADC counts into ohm, ``layout`` where the
+    channels sit, ``profile`` the profile the settings came from (for messages).
+    """
 
     name: str
     device_id: int
     encoding: str
     n_channels: int
     registers: RegisterMap
-    divider: Divider
+    front_end: FrontEnd
     channels: tuple[ChannelConfig, ...]
     allow_write: bool
-    columns: int
-    pitch_mm: float
+    layout: GridLayout
     calibration: Path | None
+    checks: DeviceChecks = NO_CHECKS
+    profile: str | None = None
 
     def __post_init__(self) -> None:
         where = f"device {self.name!r}"
         check_integer(where, "device_id", self.device_id, *DEVICE_ID)
         check_choice(where, "encoding", self.encoding, ENCODINGS)
         check_integer(where, "channels", self.n_channels, 1, MAX_CHANNELS)
-        check_integer(
-            where, "columns", self.columns, 1, self.n_channels, f" (at most channels = {self.n_channels})"
-        )
-        check_number(where, "pitch_mm", self.pitch_mm, PITCH_MM, " mm")
+        if not isinstance(self.front_end, FrontEnd):
+            raise ConfigError(f"{where}: front_end: expected a FrontEnd, got {type(self.front_end).__name__}")
+        if not isinstance(self.layout, GridLayout) or self.layout.n_channels != self.n_channels:
+            raise ConfigError(f"{where}: layout: expected a GridLayout of {self.n_channels} channels")
+        if not isinstance(self.checks, DeviceChecks):
+            raise ConfigError(f"{where}: checks: expected DeviceChecks, got {type(self.checks).__name__}")
         if len(self.channels) != self.n_channels:
             raise ConfigError(
                 f"{where}: {len(self.channels)} channel entries for channels = {self.n_channels}"
@@ -194,6 +213,15 @@ class DeviceConfig:
             if channel.name in names:
                 raise ConfigError(f"{where}: duplicate channel name {channel.name!r}")
             names.add(channel.name)
+
+    @property
+    def columns(self) -> int:
+        return self.layout.columns
+
+    @property
+    def pitch_mm(self) -> float:
+        """The pitch along x (mm); ``layout`` has both."""
+        return self.layout.pitch_x_mm
 
     def channel(self, name: str) -> ChannelConfig:
         """The channel called ``name`` (``KeyError`` if there is none)."""

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from ..errors import DecodeError
 from .decode import decode_bitmap, decode_float32, decode_uint16, register_value
-from .register_map import DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS, STATUS_BITMAP_STRIDE, DeviceLayout
+from .register_map import STATUS_BITMAP_STRIDE, DeviceLayout
 
 __all__ = ["ImageBlock", "RawSample", "RegisterImage", "RegisterKind", "decode_sample"]
 
@@ -87,6 +87,8 @@ class RawSample:
     temperature_c: FloatArray | None = None
     reference_force_n: FloatArray | None = None
     device_time_s: float | None = None
+    #: the clock's raw counter value (ticks), for the wrap-around of narrow counters
+    device_ticks: int | None = None
 
 
 def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
@@ -94,11 +96,12 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
     regs = device.registers
     n = device.n_channels
     wo, bo = regs.word_order, regs.byte_order
+    table: RegisterKind = "holding" if regs.table == "holding" else "input"
     counts = resistance = None
     if device.encoding == "adc":
-        counts = decode_uint16(image.require("input", regs.adc_address, n, "ADC counts"), bo)
+        counts = decode_uint16(image.require(table, regs.adc_address, n, "ADC counts"), bo)
     elif device.encoding == "float32":
-        raw = image.require("input", regs.float_address, 2 * n, "float32 resistances")
+        raw = image.require(table, regs.float_address, 2 * n, "float32 resistances")
         resistance = decode_float32(raw, wo, bo)
     else:
         raise DecodeError(f"unknown encoding {device.encoding!r}")
@@ -106,22 +109,26 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
     if regs.status_address is not None:
         n_regs = -(-n // 16)
         for k in range(3):
-            words = image.get("input", regs.status_address + k * STATUS_BITMAP_STRIDE, n_regs)
+            words = image.get(table, regs.status_address + k * STATUS_BITMAP_STRIDE, n_regs)
             if words is not None:
                 bitmaps[k] = decode_bitmap(words, n, bo)
     temperature = reference = None
     if regs.temperature_address is not None:
-        words = image.get("input", regs.temperature_address, 2 * n)
+        words = image.get(table, regs.temperature_address, 2 * n)
         if words is not None:
             temperature = decode_float32(words, wo, bo)
     if regs.force_reference_address is not None:
-        words = image.get("input", regs.force_reference_address, 2 * n)
+        words = image.get(table, regs.force_reference_address, 2 * n)
         if words is not None:
             reference = decode_float32(words, wo, bo)
-    device_time = None
-    words = image.get("input", DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS)
-    if words is not None:
-        device_time = register_value(words.tolist(), wo, bo) / 1000.0
+    device_time = ticks = None
+    clock = regs.clock
+    if clock is not None:
+        clock_kind: RegisterKind = "holding" if clock.table == "holding" else "input"
+        words = image.get(clock_kind, clock.address, clock.registers)
+        if words is not None:
+            ticks = register_value(words.tolist(), wo, bo)
+            device_time = ticks * clock.tick_s
     return RawSample(
-        counts, resistance, bitmaps[0], bitmaps[1], bitmaps[2], temperature, reference, device_time
+        counts, resistance, bitmaps[0], bitmaps[1], bitmaps[2], temperature, reference, device_time, ticks
     )

@@ -2,8 +2,8 @@
 
 ``read_plan`` coalesces the register blocks of ``register_map.register_blocks`` into the
 fewest requests a bus allows (at most ``MODBUS_MAX_READ`` registers each, never splitting a
-float32); ``device_plan`` adds the device clock. ``block_registers`` reassembles a block from
-the answers.
+float32); ``device_plan`` adds the device clock when the register map names one.
+``block_registers`` reassembles a block from the answers.
 """
 
 from __future__ import annotations
@@ -12,13 +12,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
-from .register_map import (
-    DEVICE_TIME_ADDRESS,
-    DEVICE_TIME_REGISTERS,
-    DeviceLayout,
-    RegisterBlock,
-    register_blocks,
-)
+from .register_map import DeviceClock, DeviceLayout, RegisterBlock, register_blocks
 
 __all__ = [
     "MAX_GAP_REGISTERS",
@@ -70,7 +64,7 @@ def read_plan(
         raise ValueError(f"max_read_registers = {max_read_registers} is outside 1..{MODBUS_MAX_READ}")
     if max_gap < 0:
         raise ValueError(f"max_gap = {max_gap} must be >= 0")
-    blocks = register_blocks(device)
+    blocks = register_blocks(device, clock=False)
     widest = max(b.value_registers for b in blocks)
     if widest > max_read_registers:
         raise ValueError(
@@ -142,31 +136,40 @@ def block_registers(
 MERGE_GAP = 15
 
 
-def plan_with_device_time(plan: tuple[ReadRequest, ...], max_read_registers: int) -> tuple[ReadRequest, ...]:
-    """Add the device clock (input registers 2-5, uint64 ms) to a read plan.
+def plan_with_device_time(
+    plan: tuple[ReadRequest, ...], clock: DeviceClock, max_read_registers: int
+) -> tuple[ReadRequest, ...]:
+    """Add the device clock to a read plan.
 
     The clock makes the creep time steps right whatever the poll timing (and with a
-    simulator running faster than real time). It joins an input read that touches it,
-    else it is one more request (registers 7-15 do not exist, so it cannot ride on the
-    status read). A device without the clock answers exception 2 and the poller falls
-    back to the plan without it (host clock).
+    simulator running faster than real time). It joins a read of its table that touches or
+    adjoins it, else it is one more request: registers across a wider gap may not exist
+    (the simulator's 7-15 do not), so the clock never rides on a read over unknown ground.
     """
-    lo, hi = DEVICE_TIME_ADDRESS, DEVICE_TIME_ADDRESS + DEVICE_TIME_REGISTERS - 1
-    inputs = [r for r in plan if r.kind == "input"]
-    if any(r.address <= lo and r.end >= hi for r in inputs):
-        return plan
-    for r in inputs:
+    lo, hi = clock.address, clock.address + clock.registers - 1
+    same = [r for r in plan if r.kind == clock.table]
+    if any(r.address <= lo and r.end >= hi for r in same):
+        return tuple(
+            ReadRequest(r.kind, r.address, r.count, ("device_time", *r.purpose))
+            if r.address <= lo and r.end >= hi and "device_time" not in r.purpose
+            else r
+            for r in plan
+        )
+    for r in same:
         start, end = min(r.address, lo), max(r.end, hi)
         if r.address <= hi + 1 and r.end >= lo - 1 and end - start + 1 <= max_read_registers:
-            merged = ReadRequest("input", start, end - start + 1, ("device_time", *r.purpose))
+            merged = ReadRequest(r.kind, start, end - start + 1, ("device_time", *r.purpose))
             return tuple(merged if q is r else q for q in plan)
-    return (ReadRequest("input", lo, DEVICE_TIME_REGISTERS, ("device_time",)), *plan)
+    return (ReadRequest(clock.table, lo, clock.registers, ("device_time",)), *plan)
 
 
 def device_plan(
     device: DeviceLayout, max_read_registers: int, merge_gap: int, clock: bool
 ) -> tuple[ReadRequest, ...]:
     """The reads of one poll: the configuration's ``read_plan`` (coalesced across gaps of
-    ``merge_gap`` registers) plus the device clock when ``clock``."""
+    ``merge_gap`` registers) plus the device clock when the map names one and ``clock``."""
     plan = tuple(read_plan(device, max_read_registers, max_gap=merge_gap))
-    return plan_with_device_time(plan, max_read_registers) if clock else plan
+    device_clock = device.registers.clock
+    if not clock or device_clock is None:
+        return plan
+    return plan_with_device_time(plan, device_clock, max_read_registers)

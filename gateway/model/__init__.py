@@ -11,10 +11,12 @@ plus the further effects named in ``docs/record-format.md``.
 * ``state``: the per-channel state the state-carrying effects own;
 * ``inversion``: force from resistance (statuses, Newton solvers);
 * ``model``: ``SensorModel``, which puts them together;
-* ``divider``: the read-out of eq. 18 and the paper's conductance line.
+* ``frontend``: the read-out front ends (``Divider``, the high-side divider of eq. 18;
+  ``LowSideDivider``; ``Transimpedance``) with their ADC, both ways;
+* ``divider``: the paper's conductance line (and ``Divider`` re-exported).
 """
 
-from .divider import ConductanceLine, Divider, DividerStatus
+from .divider import ConductanceLine
 from .effects import (
     EFFECT_DESCRIPTIONS,
     EFFECT_NAMES,
@@ -25,6 +27,15 @@ from .effects import (
     parse_effects,
 )
 from .evaluator import ResistanceBreakdown
+from .frontend import (
+    FRONT_END_KINDS,
+    Divider,
+    DividerStatus,
+    FrontEnd,
+    LowSideDivider,
+    Transimpedance,
+    front_end_from_kind,
+)
 from .inversion import ForceStatus, Inversion
 from .model import SensorModel
 from .params import ChannelParams, ParameterError, SensorParams, parameter_names
@@ -35,19 +46,24 @@ __all__ = [
     "EFFECT_DESCRIPTIONS",
     "EFFECT_NAMES",
     "EFFECT_PARAMETERS",
+    "FRONT_END_KINDS",
     "PAPER_EFFECTS",
     "ChannelParams",
     "ConductanceLine",
     "Divider",
     "DividerStatus",
     "ForceStatus",
+    "FrontEnd",
     "Inversion",
+    "LowSideDivider",
     "ModelState",
     "ParameterError",
     "ResistanceBreakdown",
     "SensorModel",
     "SensorParams",
+    "Transimpedance",
     "UnknownEffectError",
+    "front_end_from_kind",
     "parameter_names",
     "parse_effects",
 ]

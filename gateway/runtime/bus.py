@@ -45,6 +45,7 @@ from ..errors import (
     DeviceConnectionError,
     DeviceError,
     DeviceExceptionResponse,
+    DeviceMismatchError,
     DeviceTimeoutError,
 )
 from ..modbus.client import ModbusTransport
@@ -52,7 +53,8 @@ from ..modbus.image import RegisterImage, RegisterKind, decode_sample
 from ..modbus.plan import MERGE_GAP, ReadRequest, device_plan
 from ..modbus.transport import Transport
 from .counters import DeviceCounters, Tally
-from .processor import DeviceProcessor, DeviceState
+from .identity import verify_device
+from .processor import ClockHealth, DeviceProcessor, DeviceState
 from .snapshot import DeviceSnapshot
 
 log = logging.getLogger(__name__)
@@ -69,6 +71,8 @@ def error_reason(exc: BaseException) -> str:
         return "timeout"
     if isinstance(exc, DeviceExceptionResponse):
         return "exception"
+    if isinstance(exc, DeviceMismatchError):
+        return "mismatch"
     return "decode"
 
 
@@ -131,6 +135,7 @@ class DeviceRunner:
     max_read_registers: int = 125
     merge_gap: int = MERGE_GAP  # 0 once the device refused a merged read
     clock: bool = True  # False once the device refused the clock registers
+    verified: bool = False  # the device's checks passed on this connection
     tally: Tally = field(default_factory=Tally)
     failures: int = 0
     next_attempt: float = 0.0
@@ -305,7 +310,10 @@ class BusWorker:
         if conversion.result is None:
             return
         runner.pending = None
+        before = runner.state.clock
         snap, runner.state = conversion.result
+        if runner.state.clock != before:
+            self._log_clock(runner, before, runner.state.clock)
         runner.failures = 0
         runner.next_attempt = 0.0
         runner.last_error = None
@@ -316,8 +324,16 @@ class BusWorker:
         """After exception 2 (illegal address): drop the clock, then the merging. True if
         the plan changed (and the poll is worth repeating)."""
         name = runner.config.name
-        if runner.clock and "device_time" in req.purpose:
-            log.info("device %s has no clock registers (2-5); using the host clock", name)
+        clock = runner.config.registers.clock
+        if runner.clock and "device_time" in req.purpose and clock is not None:
+            log.warning(
+                "device %s: the clock configured at %s registers %d..%d (clock.address) answered exception 2 "
+                "(illegal data address); timing creep with the host clock",
+                name,
+                clock.table,
+                clock.address,
+                clock.address + clock.registers - 1,
+            )
             runner.clock = False
         elif runner.merge_gap > 0 and req.count > 1:
             log.info(
@@ -328,6 +344,52 @@ class BusWorker:
             return False
         runner.plan = device_plan(runner.config, runner.max_read_registers, runner.merge_gap, runner.clock)
         return True
+
+    async def _verify(self, runner: DeviceRunner) -> bool:
+        """Run the device's checks once per connection (``identity.verify_device``); True if
+        it may be polled. Raises ``DeviceConnectionError`` when the connection is gone."""
+        if not runner.config.checks:
+            runner.verified = True
+            return True
+        runner.tally.read()
+        try:
+            await verify_device(self.transport, runner.config)
+        except DeviceError as exc:
+            runner.tally.error(error_reason(exc))
+            self.settle_now(runner)
+            self._fail(runner, exc)
+            if isinstance(exc, DeviceConnectionError):
+                raise
+            return False
+        runner.verified = True
+        return True
+
+    def _log_clock(self, runner: DeviceRunner, before: ClockHealth, after: ClockHealth) -> None:
+        """Say once when a device clock misbehaves, and when the host clock takes over."""
+        name = runner.config.name
+        clock = runner.config.registers.clock
+        where = (
+            f"{clock.table} registers {clock.address}..{clock.address + clock.registers - 1}" if clock else ""
+        )
+        if after.fallback is not None and before.fallback is None:
+            why = (
+                "has not advanced while polls succeed"
+                if after.fallback == "stuck"
+                else f"went back {after.backwards} times"
+            )
+            log.warning(
+                "device %s: the device clock (%s) %s; timing creep with the host clock from now on "
+                '(check clock.address, or set clock = "host")',
+                name,
+                where,
+                why,
+            )
+        elif after.backwards > before.backwards and before.backwards == 0:
+            log.warning(
+                "device %s: the device clock (%s) went back (device restart?); one step timed by the host",
+                name,
+                where,
+            )
 
     def _fail(self, runner: DeviceRunner, exc: BaseException) -> None:
         runner.failures += 1
@@ -358,6 +420,7 @@ class BusWorker:
         self.connect_failures = 0
         for runner in self.runners:
             runner.next_attempt = 0.0
+            runner.verified = False
         return True
 
     def _fail_quiet(self, runner: DeviceRunner, exc: BaseException) -> None:
@@ -377,6 +440,8 @@ class BusWorker:
                 if self._mono() < runner.next_attempt:
                     continue
                 try:
+                    if not runner.verified and not await self._verify(runner):
+                        continue
                     await self.poll_device(runner)
                 except DeviceConnectionError:
                     await self.transport.close()

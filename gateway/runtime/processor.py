@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from ..config import ChannelConfig, DeviceConfig
 from ..errors import DecodeError
 from ..modbus.image import RawSample
-from ..model import Divider, DividerStatus, ForceStatus, ModelState, SensorModel
+from ..model import DividerStatus, ForceStatus, FrontEnd, ModelState, SensorModel
 from .snapshot import (
     VALUED,
     ChannelStatus,
@@ -64,6 +64,7 @@ _CHANNEL_STALE = int(ChannelStatus.STALE)
 _DIVIDER_INVALID = int(DividerStatus.INVALID)
 _DIVIDER_OPEN = int(DividerStatus.OPEN)
 _DIVIDER_SHORT = int(DividerStatus.SHORT)
+_DIVIDER_SATURATED = int(DividerStatus.SATURATED)
 _FORCE_INVALID = int(ForceStatus.INVALID)
 _FORCE_NO_CONTACT = int(ForceStatus.NO_CONTACT)
 _FORCE_OK = int(ForceStatus.OK)
@@ -105,12 +106,17 @@ def _base_status(divider_status: int, open_bit: int, short_bit: int) -> int:
         return _CHANNEL_OPEN
     if short_bit:
         return _CHANNEL_SHORT
+    if divider_status == _DIVIDER_SATURATED:
+        return _CHANNEL_SATURATED
     return _CHANNEL_ERROR if divider_status == _DIVIDER_INVALID else _CHANNEL_OK
 
 
 #: Base status of an ADC channel by 4 * divider status + 2 * open bit + short bit (with bitmaps).
 _BASE_FROM_BITMAPS = frozen_copy(
-    np.array([_base_status(d, o, sh) for d in range(4) for o in (0, 1) for sh in (0, 1)], dtype=np.int8)
+    np.array(
+        [_base_status(d, o, sh) for d in range(len(DividerStatus)) for o in (0, 1) for sh in (0, 1)],
+        dtype=np.int8,
+    )
 )
 #: What a rail reads as when the device's bitmaps say the channel is not faulty (ohm).
 _BIG_OHM = float(np.finfo(np.float64).max)
@@ -130,7 +136,7 @@ class AdcTables:
 
 
 @functools.lru_cache(maxsize=16)
-def _adc_tables(divider: Divider) -> AdcTables:
+def _adc_tables(divider: FrontEnd) -> AdcTables:
     """Lookup tables of a divider, shared by every device that has it (about 2 MB)."""
     r, status = divider.resistance(np.arange(0x10000, dtype=np.int64))
     return AdcTables(
@@ -141,10 +147,34 @@ def _adc_tables(divider: Divider) -> AdcTables:
     )
 
 
-#: Base status of an ADC channel by divider status (no bitmaps: the rails are faults).
+#: Base status of an ADC channel by divider status (no bitmaps: the rails are faults; an
+#: ADC rail that is not the circuit's open or short level is a reading beyond the range).
 _BASE_FROM_DIVIDER = frozen_copy(
-    np.array([_CHANNEL_OK, _CHANNEL_OPEN, _CHANNEL_SHORT, _CHANNEL_ERROR], dtype=np.int8)
+    np.array([_CHANNEL_OK, _CHANNEL_OPEN, _CHANNEL_SHORT, _CHANNEL_ERROR, _CHANNEL_SATURATED], dtype=np.int8)
 )
+
+
+#: A device clock that has not advanced for this long (host seconds, at least three of
+#: its ticks) while polls succeed is stuck: the host clock takes over.
+CLOCK_STUCK_AFTER_S = 2.0
+#: A wrapping (16/32-bit) clock that steps more than this many times the host's step
+#: (plus one second) has jumped, not wrapped.
+CLOCK_JUMP_FACTOR = 10.0
+#: After this many backward jumps the device clock is not trusted any more.
+CLOCK_MAX_BACKWARD_JUMPS = 3
+
+
+@dataclass(frozen=True)
+class ClockHealth:
+    """What the conversion has seen of a device clock: the last counter value, the host
+    time at which it last advanced, faults by kind, and whether the host clock took over
+    for good (``fallback``)."""
+
+    last_ticks: int | None = None
+    advanced_host_time_s: float | None = None
+    stuck: int = 0
+    backwards: int = 0
+    fallback: str | None = None  # why the host clock took over: "stuck", "backwards"
 
 
 @dataclass(frozen=True)
@@ -156,6 +186,7 @@ class DeviceState:
     last_host_time_s: float | None = None
     time_from_device: bool = False
     last: DeviceSnapshot | None = None
+    clock: ClockHealth = ClockHealth()
 
 
 def state_arrays(state: ModelState) -> list[FloatArray]:
@@ -220,6 +251,42 @@ class DeviceProcessor:
         every = np.array_equal(self.index, np.arange(device.n_channels))
         self._pick: slice | NDArray[np.int64] = slice(None) if every else self.index
         self._no_values = frozen_copy(np.full(len(chans), np.nan))
+        self._baseline = self._baseline_correction()
+
+    def _baseline_correction(self) -> tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray] | None:
+        """Channels with an unloaded baseline: (positions, excess conductance S, the model's
+        unloaded conductance S and resistance ohm).
+
+        A channel that reads ``R_b`` unloaded where the model expects ``R_0 = R(0 N)`` has a
+        parallel path of conductance ``1/R_b - 1/R_0`` (board leakage, a preloaded cell, an
+        amplifier offset seen as one). It is taken off every reading, so a reading at the
+        baseline is the model's unloaded sensor: 0 N, no contact.
+        """
+        positions = [k for k, c in enumerate(self.channels) if c.baseline_ohm is not None]
+        if not positions:
+            return None
+        r0 = np.full(len(self.channels), np.inf)
+        for ks, model in self.groups:
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                r0[ks] = model.resistance(np.zeros(len(ks)))
+        pos = np.array(positions, dtype=np.intp)
+        baseline = np.array([self.channels[k].baseline_ohm for k in positions], dtype=np.float64)
+        g0 = np.where(np.isinf(r0[pos]), 0.0, 1.0 / r0[pos])
+        with np.errstate(divide="ignore"):
+            excess = np.where(np.isinf(baseline), 0.0, 1.0 / baseline) - g0
+        return pos, frozen_copy(excess), frozen_copy(g0), frozen_copy(r0[pos])
+
+    def _tare(self, r_model: FloatArray) -> FloatArray:
+        """``r_model`` with each baseline channel's excess conductance taken off."""
+        if self._baseline is None:
+            return r_model
+        pos, excess, g0, r0 = self._baseline
+        r = np.array(r_model, dtype=np.float64, copy=True)
+        measured = r[pos]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = 1.0 / measured - excess
+            r[pos] = np.where(np.isnan(measured), np.nan, np.where(g > g0, 1.0 / g, r0))
+        return r
 
     @property
     def name(self) -> str:
@@ -249,7 +316,7 @@ class DeviceProcessor:
             return DeviceState(model_state)
         last = state.last if state.last is not None and state.last.channel_names == self.names else None
         return DeviceState(
-            model_state, state.last_time_s, state.last_host_time_s, state.time_from_device, last
+            model_state, state.last_time_s, state.last_host_time_s, state.time_from_device, last, state.clock
         )
 
     def kept_channels(self, old: DeviceProcessor) -> int:
@@ -269,10 +336,10 @@ class DeviceProcessor:
         if raw.counts is not None:
             counts = raw.counts[idx]
             if counts.dtype == np.uint16:  # register values: every quantity is a lookup
-                table = _adc_tables(self.device.divider)
+                table = _adc_tables(self.device.front_end)
                 r_out, dstat = table.report_ohm[counts], table.status[counts]
             else:
-                r, dstat = self.device.divider.resistance(counts)
+                r, dstat = self.device.front_end.resistance(counts)
                 table = None
                 r_out = np.where(r == np.inf, np.nan, r)  # the open rail has no resistance value
             if raw.open_bits is None and raw.short_bits is None:
@@ -309,17 +376,51 @@ class DeviceProcessor:
             status[raw.short_bits[idx] & (status != _CHANNEL_OPEN)] = _CHANNEL_SHORT
         return r_out, r_model, status
 
-    def _dt(self, state: DeviceState, raw: RawSample, host_time_s: float) -> tuple[float, float, bool]:
-        """Seconds since the previous sample: device clock if it has one, else host clock."""
-        use_device = raw.device_time_s is not None
-        now = raw.device_time_s if raw.device_time_s is not None else host_time_s
-        if state.last_time_s is None:
-            return 0.0, now, use_device
-        if use_device == state.time_from_device and now >= state.last_time_s:
-            return now - state.last_time_s, now, use_device
-        # clock source changed or the device clock went back (restart): use the host clock
+    def _dt(
+        self, state: DeviceState, raw: RawSample, host_time_s: float
+    ) -> tuple[float, float, bool, ClockHealth]:
+        """Seconds since the previous sample, the time to remember, whether it came from the
+        device clock, and the clock's health.
+
+        The device clock is used while it behaves. A counter that does not advance for
+        ``CLOCK_STUCK_AFTER_S`` while polls succeed is stuck (a register that is not a clock,
+        a frozen firmware): the host clock takes over for good, and the step covers the host
+        time since the counter last advanced, so the creep lost meanwhile is made up. A
+        counter that goes back (a restart) or, for a 16/32-bit counter, steps implausibly
+        far, costs that one step the host clock; after ``CLOCK_MAX_BACKWARD_JUMPS`` of them
+        the host clock takes over for good.
+        """
+        health = state.clock
         host_dt = host_time_s - state.last_host_time_s if state.last_host_time_s is not None else 0.0
-        return max(0.0, host_dt), now, use_device
+        host_dt = max(0.0, host_dt)
+        clock = self.device.registers.clock
+        if raw.device_time_s is None or clock is None or health.fallback is not None:
+            return (host_dt if state.last_time_s is not None else 0.0), host_time_s, False, health
+        ticks = raw.device_ticks if raw.device_ticks is not None else round(raw.device_time_s / clock.tick_s)
+        if health.last_ticks is None or not state.time_from_device or state.last_time_s is None:
+            first = ClockHealth(ticks, host_time_s, health.stuck, health.backwards)
+            return (host_dt if state.last_time_s is not None else 0.0), raw.device_time_s, True, first
+        delta = ticks - health.last_ticks
+        if clock.registers < 4:
+            delta %= clock.modulus
+        step_s = delta * clock.tick_s
+        backwards = delta < 0 or (
+            clock.registers < 4 and step_s > CLOCK_JUMP_FACTOR * host_dt + 1.0 and step_s > 2 * clock.tick_s
+        )
+        if backwards:
+            n = health.backwards + 1
+            fallback = "backwards" if n >= CLOCK_MAX_BACKWARD_JUMPS else None
+            new = ClockHealth(ticks, host_time_s, health.stuck, n, fallback)
+            return host_dt, (host_time_s if fallback else raw.device_time_s), fallback is None, new
+        if delta == 0:
+            advanced = health.advanced_host_time_s
+            since = host_time_s - (advanced if advanced is not None else host_time_s)
+            if since > max(CLOCK_STUCK_AFTER_S, 3.0 * clock.tick_s):
+                new = ClockHealth(ticks, advanced, health.stuck + 1, health.backwards, "stuck")
+                return max(0.0, since), host_time_s, False, new
+            return 0.0, raw.device_time_s, True, replace(health, last_ticks=ticks)
+        new = ClockHealth(ticks, host_time_s, health.stuck, health.backwards)
+        return step_s, raw.device_time_s, True, new
 
     def process(
         self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
@@ -337,7 +438,8 @@ class DeviceProcessor:
         """First step of ``process``: resistances and drift-corrected forces."""
         n = len(self.channels)
         r_out, r_model, base = self._resistance(raw)
-        dt, now, use_device = self._dt(state, raw, host_time_s)
+        r_model = self._tare(r_model)
+        dt, now, use_device, clock_health = self._dt(state, raw, host_time_s)
         usable = base == _CHANNEL_OK
         if not usable.all():
             r_model = np.where(usable, r_model, np.nan)
@@ -364,12 +466,13 @@ class DeviceProcessor:
             new_state_model = state_from_arrays(new)
         return TrackedSample(
             raw, r_out, r_model, base, force, model_status, temperature,
-            DeviceState(new_state_model, now, host_time_s, use_device, None), wall_time_s,
+            DeviceState(new_state_model, now, host_time_s, use_device, None, clock_health), wall_time_s,
         )  # fmt: skip
 
     def finish(self, tracked: TrackedSample) -> tuple[DeviceSnapshot, DeviceState]:
         """Second step of ``process``: statuses, array quantities and the snapshot."""
         raw, base, temperature = tracked.raw, tracked.base_status, tracked.temperature_c
+        clock = tracked.state.clock
         code = base * np.int8(8) + tracked.model_status * np.int8(2)
         if raw.saturated_bits is not None:
             code += raw.saturated_bits[self._pick].view(np.int8)
@@ -379,7 +482,7 @@ class DeviceProcessor:
         reference = self._no_values
         if raw.reference_force_n is not None:
             reference = read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
-        q = array_quantities(force, status, self.x_mm, self.y_mm, float(self.device.pitch_mm))
+        q = array_quantities(force, status, self.x_mm, self.y_mm, self.device.layout.cell_area_mm2)
         wall_time_s = tracked.wall_time_s
         snap = DeviceSnapshot(
             device=self.device.name,
@@ -400,6 +503,9 @@ class DeviceProcessor:
             last_success_timestamp_s=wall_time_s,
             device_time_s=raw.device_time_s,
             poll_interval_s=self.poll_interval_s,
+            time_source="device" if tracked.state.time_from_device else "host",
+            clock_faults=(("stuck", clock.stuck), ("backwards", clock.backwards)),
+            clock_fallback=self._clock_fallback(raw, clock),
             total_force_n=q.total_force_n,
             center_of_pressure_mm=q.center_of_pressure_mm,
             channels_in_contact=q.channels_in_contact,
@@ -411,7 +517,15 @@ class DeviceProcessor:
             else read_only(np.asarray(temperature, dtype=np.float64)),
         )
         s = tracked.state
-        return snap, DeviceState(s.model_state, s.last_time_s, s.last_host_time_s, s.time_from_device, snap)
+        return snap, replace(s, last=snap)
+
+    def _clock_fallback(self, raw: RawSample, clock: ClockHealth) -> str | None:
+        """Why a device whose map names a clock is timed by the host clock (None if it is not)."""
+        if self.device.registers.clock is None:
+            return None
+        if clock.fallback is not None:
+            return clock.fallback
+        return "unreadable" if raw.device_time_s is None else None
 
     def stale(self, state: DeviceState, wall_time_s: float, error: str) -> tuple[DeviceSnapshot, DeviceState]:
         """The device did not answer: keep the last values, mark every channel stale.

@@ -147,6 +147,9 @@ class DeviceSnapshot:
     peak_force_n: float | None = None
     error: str | None = None  # why the last poll failed
     temperature_c: FloatArray | None = None  # sensor temperature where the device reports it, degC
+    time_source: str = "host"  # what timed the creep step of this poll: "device" or "host"
+    clock_faults: tuple[tuple[str, int], ...] = ()  # device clock faults by kind: stuck, backwards
+    clock_fallback: str | None = None  # why the host clock times a device whose map has a clock
 
     @property
     def n_channels(self) -> int:
@@ -194,12 +197,12 @@ class ArrayQuantities:
 
 
 def array_quantities(
-    force_n: FloatArray, status: StatusArray, x_mm: FloatArray, y_mm: FloatArray, pitch_mm: float
+    force_n: FloatArray, status: StatusArray, x_mm: FloatArray, y_mm: FloatArray, cell_area_mm2: float
 ) -> ArrayQuantities:
     """Total force (N), centre of pressure (mm), contact area (mm^2) and peak channel.
 
     The centre of pressure is sum(F_i x_i) / sum(F_i) over channels in contact; it is None
-    (not NaN) when nothing is in contact. Contact area = channels in contact x pitch^2.
+    (not NaN) when nothing is in contact. Contact area = channels in contact x cell area.
     """
     f = np.asarray(force_n, dtype=np.float64)
     contact = IN_CONTACT[np.asarray(status)] & (f > 0.0)  # NaN is never > 0
@@ -210,7 +213,7 @@ def array_quantities(
     total = float(fc.sum())
     cop = (float(np.dot(fc, x_mm)) / total, float(np.dot(fc, y_mm)) / total)
     peak = int(fc.argmax())  # forces in contact are > 0, the rest 0
-    return ArrayQuantities(total, cop, n, float(n * pitch_mm * pitch_mm), peak, float(f[peak]))
+    return ArrayQuantities(total, cop, n, float(n * cell_area_mm2), peak, float(f[peak]))
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,7 @@ poll_interval_s = 0.01
 [[bus.device]]
 name = "sensor"
 device_id = 1
+profile = "tactile-sim"
 channels = 1
 columns = 1
 {cal}[bus.device.registers]

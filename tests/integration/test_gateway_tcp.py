@@ -135,7 +135,7 @@ def array_device(array: SimArray, name: str, device_id: int = 1, bench: bool = T
         gateway_params(array.channel_params),
         cfg.columns,
         cfg.pitch_mm,
-        divider=Divider(cfg.supply_v, cfg.reference_ohm, cfg.adc_bits),
+        front_end=Divider(cfg.supply_v, cfg.reference_ohm, cfg.adc_bits),
         registers=RegisterMap(force_reference_address=1000 if bench else None),
     )
 

@@ -184,6 +184,7 @@ backoff_max_s = 1.0
 [[bus.device]]
 name = "array1"
 device_id = 1
+profile = "tactile-sim"
 encoding = "adc"
 channels = {channels}
 columns = 4

@@ -136,6 +136,7 @@ backoff_max_s = 1.0
 [[bus.device]]
 name = "array1"
 device_id = 1
+profile = "tactile-sim"
 channels = 4
 columns = 2
 """

@@ -47,6 +47,7 @@ poll_interval_s = {poll_interval_s}
 [[bus.device]]
 name = "array1"
 device_id = 1
+profile = "tactile-sim"
 channels = {channels}
 columns = 1
 [bus.device.registers]

@@ -69,6 +69,7 @@ port = 5020
 [[bus.device]]
 name = "array1"
 device_id = 1
+profile = "tactile-sim"
 channels = 1
 calibration = "{cal_path}"
 [[bus.device.channel]]

@@ -27,6 +27,7 @@ port = 5020
 [[bus.device]]
 name = "array1"     # left hand
 device_id = 1
+profile = "tactile-sim"
 channels = 16
 
 [bus.device.registers]
@@ -40,6 +41,7 @@ params = { r0_ohm = 190e3, force_max_n = 5.0 }  # from calibration run 3
 [[bus.device]]
 name = "array2"
 device_id = 2
+profile = "tactile-sim"
 encoding = "float32"
 channels = 4
 
@@ -105,7 +107,7 @@ def test_check_config_rtu_bus_line(tmp_path: Path) -> None:
     path = tmp_path / "rtu.toml"
     path.write_text(
         '[[bus]]\nname = "line"\nkind = "rtu"\nserial_port = "/dev/ttyUSB0"\nbaudrate = 9600\n'
-        '[[bus.device]]\nname = "a"\ndevice_id = 3\nchannels = 1\n'
+        '[[bus.device]]\nname = "a"\ndevice_id = 3\nprofile = "tactile-sim"\nchannels = 1\n'
     )
     result = run("check-config", "-c", str(path))
     assert result.exit_code == 0, result.output
@@ -241,9 +243,10 @@ def test_set_adds_the_channel_array_to_a_device_without_entries(tmp_path: Path) 
     path = tmp_path / "g.toml"
     text = (
         '[[bus]]\nname = "b"\nkind = "tcp"\nhost = "h"\n\n[[bus.device]]\nname = "d"\ndevice_id = 1\n'
+        'profile = "tactile-sim"\n'
         "channels = 4\n\n[bus.device.divider]\nadc_bits = 12   # 12-bit ADC\n\n"
         '[[bus]]\nname = "c"\nkind = "tcp"\nhost = "h2"\n\n'
-        '[[bus.device]]\nname = "e"\ndevice_id = 1\nchannels = 2\n'
+        '[[bus.device]]\nname = "e"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 2\n'
     )
     path.write_text(text)
     result = run("channels", "disable", "ch03", "-c", str(path))
@@ -291,7 +294,7 @@ def test_set_param_on_a_sub_table(tmp_path: Path) -> None:
     path = tmp_path / "g.toml"
     text = (
         '[[bus]]\nname = "b"\nkind = "tcp"\nhost = "h"\n'
-        '[[bus.device]]\nname = "d"\ndevice_id = 1\nchannels = 2\n'
+        '[[bus.device]]\nname = "d"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 2\n'
         "[[bus.device.channel]]\nindex = 1\n[bus.device.channel.params]\nr0_ohm = 1e5   # measured\n"
     )
     path.write_text(text)
@@ -358,7 +361,8 @@ def test_edit_of_inline_device_tables(tmp_path: Path) -> None:
     text = (
         '[[bus]]\nname = "b"\nkind = "tcp"\nhost = "h"\n'
         "device = [\n"
-        '  { name = "d", device_id = 1, channels = 4, channel = [{ index = 0, name = "a" }] },  # inline\n'
+        '  { name = "d", device_id = 1, profile = "tactile-sim", channels = 4, '
+        'channel = [{ index = 0, name = "a" }] },  # inline\n'
         "]\n"
     )
     path.write_text(text)

@@ -22,6 +22,7 @@ port = 5020
 [[bus.device]]
 name = "array1"
 device_id = 1
+profile = "tactile-sim"
 channels = 16
 """
 
@@ -34,6 +35,7 @@ serial_port = "/dev/ttyUSB0"
 [[bus.device]]
 name = "rtu1"
 device_id = 1
+profile = "tactile-sim"
 channels = 4
 """
 

@@ -40,7 +40,7 @@ def test_minimal_config_gets_every_default() -> None:
     assert (dev.name, dev.device_id, dev.encoding, dev.n_channels) == ("array1", 1, "adc", 16)
     assert dev.registers == RegisterMap()
     assert dev.registers.status_address == 16 and dev.registers.force_reference_address is None
-    assert dev.divider == Divider()
+    assert dev.front_end == Divider()
     assert (dev.allow_write, dev.columns, dev.pitch_mm, dev.calibration) == (False, 4, 2.5, None)
     assert [ch.name for ch in dev.channels] == [f"ch{i:02d}" for i in range(16)]
     assert all(
@@ -122,7 +122,7 @@ params = { r0_ohm = 190000.0 }
     dev = parse(text).buses[0].devices[0]
     assert dev.encoding == "float32" and dev.allow_write
     assert dev.registers == RegisterMap(100, 400, "little", "big", None, 1000, 1600)
-    assert dev.divider == Divider(3.3, 4700.0, 12)
+    assert dev.front_end == Divider(3.3, 4700.0, 12)
     assert dev.channels[0].effects == ("tunneling", "creep", "leakage")
     assert dev.channels[0].params == SensorParams(r0_ohm=150000.0, force_max_n=5.0)
     tip = dev.channel("tip")
@@ -272,10 +272,10 @@ def test_configs_built_in_code_are_validated_like_files() -> None:
     from gateway.model import Divider, SensorParams
 
     params = [SensorParams(), SensorParams(r0_ohm=1.5e5)]
-    dev = device_config_for("arr", 3, params, 2, 2.5, divider=Divider(3.3, 4.7e3, 12))
+    dev = device_config_for("arr", 3, params, 2, 2.5, front_end=Divider(3.3, 4.7e3, 12))
     assert [c.params.r0_ohm for c in dev.channels] == [SensorParams().r0_ohm, 1.5e5]
     assert [(c.name, c.x_mm, c.y_mm) for c in dev.channels] == [("ch00", 0.0, 0.0), ("ch01", 2.5, 0.0)]
-    assert dev.divider == Divider(3.3, 4.7e3, 12) and dev.registers == RegisterMap()
+    assert dev.front_end == Divider(3.3, 4.7e3, 12) and dev.registers == RegisterMap()
     bus = bus_config_for("b", "rtu", [dev], serial_port="/dev/ttyUSB0", baudrate=19200)
     assert (bus.baudrate, bus.parity, bus.devices) == (19200, "N", (dev,))
     config = gateway_config_for([bus], "::1", 9999)

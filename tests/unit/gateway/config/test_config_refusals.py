@@ -12,7 +12,7 @@ from gateway.errors import ConfigError
 
 # (id, configuration text, fragments the message must contain)
 BAD_CONFIGS: list[tuple[str, str, tuple[str, ...]]] = [
-    ("toml-syntax", BASE + "x = \n", ("invalid TOML at line 14, column 5", "Invalid value")),
+    ("toml-syntax", BASE + "x = \n", ("invalid TOML at line 15, column 5", "Invalid value")),
     ("toml-duplicate-key", replaced("port = 5020", "port = 5020\nport = 5021"), ("invalid TOML at line 9",)),
     ("root-unknown-key", replaced("[[bus]]", "[[buses]]"), ("buses: unknown key; did you mean 'bus'?",)),
     (
@@ -222,7 +222,7 @@ BAD_CONFIGS: list[tuple[str, str, tuple[str, ...]]] = [
     ),
     (
         "device-id-duplicate",
-        BASE + '\n[[bus.device]]\nname = "array2"\ndevice_id = 1\nchannels = 4\n',
+        BASE + '\n[[bus.device]]\nname = "array2"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 4\n',
         ("bus[0].device[1].device_id: duplicate device_id 1 on bus 'bench'", "unique per bus"),
     ),
     (

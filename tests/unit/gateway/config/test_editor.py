@@ -29,6 +29,7 @@ host = "127.0.0.1"
 [[bus.device]]
 name = "arr"
 device_id = 1
+profile = "tactile-sim"
 channels = 4
 model = { params = { e0_pa = 16e6 } }
 

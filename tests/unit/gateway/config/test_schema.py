@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gateway.config import bus_config_for, device_config_for, gateway_config_for
+from gateway.config.layout import GridLayout
 from gateway.config.schema import BusConfig, ChannelConfig, DeviceConfig, MetricsConfig
 from gateway.errors import ConfigError
 from gateway.model import PAPER_EFFECTS, SensorParams
@@ -47,8 +48,16 @@ CHANNEL = DEVICE.channels[0]
             "device 'arr': device_id: 0 is out of range; allowed: 1..247",
         ),
         (
-            lambda: dataclasses.replace(DEVICE, columns=5),
+            lambda: dataclasses.replace(DEVICE.layout, columns=5),
             "columns: 5 is out of range; allowed: 1..4 (at most channels = 4)",
+        ),
+        (
+            lambda: dataclasses.replace(DEVICE, layout=GridLayout(5, 2, 1.0, 1.0)),
+            "layout: expected a GridLayout of 4 channels",
+        ),
+        (
+            lambda: dataclasses.replace(DEVICE.layout, origin="centre"),
+            "origin: 'centre' is not allowed; allowed: top-left, top-right, bottom-left, bottom-right",
         ),
         (
             lambda: dataclasses.replace(DEVICE, encoding="int16"),
@@ -107,7 +116,8 @@ def test_a_valid_configuration_built_from_the_dataclasses_directly() -> None:
     channels = tuple(
         ChannelConfig(i, f"c{i}", float(i), 0.0, True, PAPER_EFFECTS, SensorParams()) for i in range(2)
     )
-    device = DeviceConfig("d", 3, "adc", 2, DEVICE.registers, DEVICE.divider, channels, False, 2, 1.0, None)
+    layout = GridLayout(2, 2, 1.0, 1.0)
+    device = DeviceConfig("d", 3, "adc", 2, DEVICE.registers, DEVICE.front_end, channels, False, layout, None)
     bus = dataclasses.replace(BUS, devices=(device,))
     assert bus.devices[0].channel("c1").x_mm == 1.0
     assert isinstance(bus, BusConfig)

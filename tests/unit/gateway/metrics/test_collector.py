@@ -15,6 +15,7 @@ from prometheus_client.parser import text_string_to_metric_families
 from prometheus_client.samples import Sample
 
 from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
+from gateway.config.layout import GridLayout
 from gateway.errors import ConfigError
 from gateway.metrics.collector import SnapshotCollector, make_registry
 from gateway.metrics.web_config import BasicAuth, load_web_config
@@ -49,7 +50,8 @@ def _device(name: str, n: int = 4) -> DeviceConfig:
         ChannelConfig(i, f"ch{i:02d}", (i % 2) * 2.5, (i // 2) * 2.5, True, PAPER_EFFECTS, SensorParams())
         for i in range(n)
     )
-    return DeviceConfig(name, 1, "adc", n, RegisterMap(), Divider(), channels, False, 2, 2.5, None)
+    layout = GridLayout(n, 2, 2.5, 2.5)
+    return DeviceConfig(name, 1, "adc", n, RegisterMap(), Divider(), channels, False, layout, None)
 
 
 def _snapshot() -> GatewaySnapshot:

@@ -97,7 +97,7 @@ def test_block_registers_reassembles_split_reads() -> None:
     plan = read_plan(dev, 125)
     image = {a: a * 3 % 65536 for a in range(0, 1200)}
     responses = [(r, [image[a] for a in range(r.address, r.end + 1)]) for r in plan]
-    (block,) = register_blocks(dev)
+    (block,) = register_blocks(dev, clock=False)
     assert block_registers(block, responses) == [image[a] for a in range(400, 528)]
     with pytest.raises(ValueError, match="misses register 524"):
         block_registers(block, responses[:1])
@@ -123,7 +123,7 @@ def test_plan_invariants(
     )  # fmt: skip
     dev = device(n, encoding, regs)
     plan = read_plan(dev, max_read)
-    blocks = register_blocks(dev)
+    blocks = register_blocks(dev, clock=False)
     assert all(1 <= r.count <= max_read for r in plan)
     assert all(a.end < b.address for a, b in itertools.pairwise(plan))
     for block in blocks:

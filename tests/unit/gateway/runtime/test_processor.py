@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
+from gateway.config.layout import GridLayout
 from gateway.errors import DecodeError
 from gateway.modbus.decode import encode_bitmap, encode_float32
 from gateway.modbus.image import RawSample, RegisterImage, decode_sample
@@ -52,11 +53,10 @@ def make_device(
         encoding=encoding,
         n_channels=n,
         registers=RegisterMap(),
-        divider=DIVIDER,
+        front_end=DIVIDER,
         channels=channels,
         allow_write=False,
-        columns=columns,
-        pitch_mm=pitch_mm,
+        layout=GridLayout(n, columns, pitch_mm, pitch_mm),
         calibration=None,
     )
 
@@ -213,7 +213,7 @@ def test_array_quantities_hand_computed() -> None:
     status = np.array(
         [ChannelStatus.OK, ChannelStatus.NO_CONTACT, ChannelStatus.SATURATED, ChannelStatus.OPEN]
     )
-    q = array_quantities(force, status, x, y, 2.5)
+    q = array_quantities(force, status, x, y, 2.5 * 2.5)
     assert q.total_force_n == 4.0
     assert q.center_of_pressure_mm == (0.0, 1.875)  # y = 3 * 2.5 / 4
     assert q.channels_in_contact == 2
@@ -404,7 +404,12 @@ def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
         (100, 16),
     ]
     touching = (ReadRequest("input", 0, 2, ("x",)),)
-    assert plan_with_device_time(touching, 125) == (ReadRequest("input", 0, 6, ("device_time", "x")),)
+    clock = dev.registers.clock
+    assert clock is not None
+    assert plan_with_device_time(touching, clock, 125) == (ReadRequest("input", 0, 6, ("device_time", "x")),)
+    # a clock the map does not name is never read
+    no_clock = dataclasses.replace(dev, registers=dataclasses.replace(dev.registers, clock=None))
+    assert [(r.address, r.count) for r in device_plan(no_clock, 125, 15, clock=True)] == [(16, 33), (100, 16)]
     bus = bus_config_for(
         "b", "tcp", [dev], host="127.0.0.1", port=1, backoff_initial_s=0.5, backoff_max_s=4.0
     )
