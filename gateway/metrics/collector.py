@@ -103,7 +103,7 @@ class SnapshotCollector:
         errors = CounterMetricFamily(
             "tactile_read_errors_total",
             "Failed Modbus read requests of the device by reason (count), up to the last poll: "
-            "timeout, exception, connection, decode",
+            "timeout, exception, connection, decode, mismatch (the device is not the configured one)",
             labels=["device", "reason"],
         )
         total = GaugeMetricFamily(
@@ -128,8 +128,22 @@ class SnapshotCollector:
             f"Number of channels in contact (count), {from_poll}",
             labels=["device"],
         )
+        clock_host = GaugeMetricFamily(
+            "tactile_device_clock_fallback",
+            "1 if the device's map names a clock but the host clock times the creep (the clock stalled, "
+            "went back or could not be read), else 0 (dimensionless)",
+            labels=["device"],
+        )
+        clock_faults = CounterMetricFamily(
+            "tactile_device_clock_faults",
+            "Device clock faults seen since the device was configured (count), by kind: stuck, backwards",
+            labels=["device", "kind"],
+        )
         for name in sorted(snap.devices):
             dev = snap.devices[name]
+            clock_host.add_metric([name], 1.0 if dev.clock_fallback is not None else 0.0)
+            for kind, count in dev.clock_faults:
+                clock_faults.add_metric([name, kind], float(count))
             for ch in dev.channels():
                 labels = [name, ch.name]
                 if _finite(ch.force_n):
@@ -181,6 +195,8 @@ class SnapshotCollector:
             cop,
             area,
             in_contact,
+            clock_host,
+            clock_faults,
         ]
 
 

@@ -17,7 +17,7 @@ from types import MappingProxyType
 
 __all__ = ["DEFAULT_DURATION_BUCKETS_S", "READ_ERROR_REASONS", "DeviceCounters", "HistogramData", "Tally"]
 
-READ_ERROR_REASONS: tuple[str, ...] = ("timeout", "exception", "connection", "decode")
+READ_ERROR_REASONS: tuple[str, ...] = ("timeout", "exception", "connection", "decode", "mismatch")
 
 DEFAULT_DURATION_BUCKETS_S: tuple[float, ...] = (
     0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,

@@ -15,11 +15,13 @@ real time on the same monotonic clock.
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from gateway.analysis.tare import compute_tare
 from gateway.config import load_config
@@ -160,7 +162,83 @@ async def test_the_rawgrid_array_through_its_profile_tare_layout_and_a_ten_minut
     assert all(abs(r[1][k2] - 2.0) <= TOLERANCE_N for r in late)
     # the drift the correction removes is there: a static lookup reads the 5 N hold high by its end
     assert np.mean([r[4][k5] for r in late]) - 5.0 > 0.2
+    corrected = np.mean([r[1][k5] for r in late])
+    static = np.mean([r[4][k5] for r in late])
     print(
-        f"\nrawgrid: {len(settled)} settled polls, max |error| {np.nanmax(errors):.4f} N; 5 N hold at its end "
-        f"{np.mean([r[1][k5] for r in late]):.3f} N corrected, {np.mean([r[4][k5] for r in late]):.3f} N static"
+        f"\nrawgrid: {len(settled)} settled polls, max |error| {np.nanmax(errors):.4f} N; "
+        f"5 N hold at its end {corrected:.3f} N corrected, {static:.3f} N static"
     )
+
+
+def _hold_array(hold_s: float) -> SimArray:
+    config = ArrayConfig(
+        register_map="rawgrid", channels=36, columns=6, pitch_mm=5.0, param_spread=False, speed=SPEED, seed=4
+    )
+    five = ProfileBuilder(0.0).hold(20.0).step(5.0).hold(hold_s).build()
+    scenario = Scenario("hold", config.layout, loads=[UniformLoad(five, channels=(FIVE_N_CHANNEL,))])
+    return SimArray(config.with_changes(scenario=scenario), clock=time.monotonic)
+
+
+async def test_a_clock_configured_on_registers_that_do_not_count_is_caught(tmp_path: Path) -> None:
+    """The issue's case: registers 2-5 hold a serial number; a user who names them as the
+    clock gets a clock that never advances. The gateway notices, says so once, exports it and
+    times the creep with the host clock, so the 5 N hold stays right."""
+    hold_s = 300.0
+    array = _hold_array(hold_s)
+    async with serve_tcp([array], host="127.0.0.1", port=0) as server:
+        path = _config(tmp_path / "gateway.toml", server.port)
+        path.write_text(path.read_text() + 'clock = { address = 2, registers = 4, unit = "ms" }\n')
+        config = load_config(path)
+        assert config.buses[0].devices[0].registers.clock is not None
+        holder = SnapshotHolder()
+        async with Poller(config, holder, monotonic=_scaled):
+            assert await until(lambda: array.device_time_s >= 20.0 + hold_s, 30.0)
+        snap = holder.get().devices["jaw"]
+    assert snap.clock_fallback == "stuck" and snap.time_source == "host"
+    assert dict(snap.clock_faults)["stuck"] == 1
+    order = array.register_channels()
+    k5 = int(np.flatnonzero(order == FIVE_N_CHANNEL)[0])
+    # no tare here: the leak reads about 0.1 N on top of the force, the same at every moment of
+    # the hold, so the drift (static lookup) against its absence (correction) is the measure
+    assert abs(float(snap.force_static_n[k5]) - float(snap.force_n[k5])) > 0.3
+    assert 5.0 <= float(snap.force_n[k5]) <= 5.0 + 0.25
+
+
+async def test_a_device_that_is_not_the_configured_one_is_not_polled(tmp_path: Path) -> None:
+    """The acme profile's checks against the simulator's default map: input register 0 is a
+    sample counter there, not the product id 0x5447."""
+    array = SimArray(ArrayConfig(channels=36, columns=6, speed=1.0))
+    async with serve_tcp([array], host="127.0.0.1", port=0) as server:
+        config = load_config(_config(tmp_path / "gateway.toml", server.port))
+        holder = SnapshotHolder()
+        async with Poller(config, holder):
+
+            def refused() -> bool:
+                snap = holder.get().devices.get("jaw")
+                return snap is not None and snap.error is not None and "not polled yet" not in snap.error
+
+            assert await until(refused, 10.0)
+        snap = holder.get().devices["jaw"]
+        counters = holder.get().counters["jaw"]
+    assert not snap.up and snap.error is not None
+    assert "not the configured device" in snap.error and "product id" in snap.error and "0x5447" in snap.error
+    assert counters.read_errors_total["mismatch"] >= 1
+    assert counters.polls_total == 0
+
+
+async def test_a_clock_register_the_device_refuses_falls_back_to_the_host_clock(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    array = _hold_array(60.0)
+    async with serve_tcp([array], host="127.0.0.1", port=0) as server:
+        path = _config(tmp_path / "gateway.toml", server.port)
+        path.write_text(path.read_text() + 'clock = { address = 20, registers = 2, unit = "ms" }\n')
+        config = load_config(path)
+        holder = SnapshotHolder()
+        with caplog.at_level(logging.WARNING, logger="gateway"):
+            async with Poller(config, holder, monotonic=_scaled):
+                assert await until(lambda: (s := holder.get().devices.get("jaw")) is not None and s.up, 10.0)
+        snap = holder.get().devices["jaw"]
+    assert snap.clock_fallback == "unreadable" and snap.time_source == "host"
+    warned = [r.getMessage() for r in caplog.records if "clock" in r.getMessage()]
+    assert any("input registers 20..21 (clock.address) answered exception 2" in m for m in warned), warned

@@ -41,6 +41,8 @@ METRICS = {
     "tactile_array_center_of_pressure_mm": "gauge",
     "tactile_array_contact_area_square_mm": "gauge",
     "tactile_array_channels_in_contact": "gauge",
+    "tactile_device_clock_fallback": "gauge",
+    "tactile_device_clock_faults": "counter",
 }
 UNIT_WORDS = re.compile(r"\((N|ohms|mm|mm\^2|s|count|dimensionless)\)|\bohms\b")
 
@@ -125,6 +127,9 @@ def test_values_come_from_the_snapshot() -> None:
     assert _value(families, "tactile_force_newtons", device="left", channel="ch03") == 0.0
     assert _value(families, "tactile_device_up", device="left") == 1.0
     assert _value(families, "tactile_device_up", device="right") == 0.0
+    # the map names a clock (registers 2-5) but the sample carried none: the host clock times it
+    assert _value(families, "tactile_device_clock_fallback", device="left") == 1.0
+    assert _value(families, "tactile_device_clock_faults_total", device="left", kind="stuck") == 0.0
     assert _value(families, "tactile_last_poll_success_timestamp_seconds", device="left") == 1_700_000_000.0
     assert _value(families, "tactile_poll_interval_seconds", device="right") == 0.2
     assert _value(families, "tactile_reads_total", device="left") == 10.0

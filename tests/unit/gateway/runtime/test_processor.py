@@ -361,7 +361,13 @@ def test_counters_and_histogram() -> None:
             tally.poll(float(event))
     c = tally.freeze()
     assert c.reads_total == 2 and c.polls_total == 3
-    assert dict(c.read_errors_total) == {"timeout": 1, "exception": 0, "connection": 0, "decode": 0}
+    assert dict(c.read_errors_total) == {
+        "timeout": 1,
+        "exception": 0,
+        "connection": 0,
+        "decode": 0,
+        "mismatch": 0,
+    }
     h = c.poll_duration
     assert h.count == 2 and h.sum == pytest.approx(0.203)  # the NaN duration counts a poll, no value
     bounds = (*h.bounds, math.inf)
