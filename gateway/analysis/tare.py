@@ -24,14 +24,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..config import DeviceConfig
 from ..errors import GatewayError
-from ..modbus.image import RawSample
 from ..model import DividerStatus, SensorModel
 
 __all__ = ["MIN_POLLS", "TareError", "TareResult", "compute_tare"]
@@ -42,6 +41,16 @@ DRIFT_FLOOR_REL: Final = 0.005
 LOADED_FACTOR: Final = 3.0
 
 FloatArray = NDArray[np.float64]
+
+
+class RawSample(Protocol):
+    """One poll's values of every channel (``gateway.modbus.image.RawSample`` is one)."""
+
+    @property
+    def counts(self) -> NDArray[np.integer[Any]] | None: ...
+
+    @property
+    def resistance_ohm(self) -> FloatArray | None: ...
 
 
 class TareError(GatewayError):

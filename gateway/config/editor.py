@@ -286,12 +286,7 @@ def edit_channel(
     document = tomlkit.parse(text)
     _edit_document(document, target, assignments)
     new_text = tomlkit.dumps(document)
-    try:
-        edited = parse_config(new_text, source=config_path)
-    except ConfigError as exc:
-        raise ConfigError(
-            f"refused, {config_path} is unchanged: the edit would make the configuration invalid:\n{exc}"
-        ) from None
+    edited = _parse_edit(config_path, new_text)
     channel = edited.buses[target.bus_index].devices[target.device_index].channels[target.channel.index]
     wrong = [a.key for a in assignments if not _took_effect(channel, a)]
     if wrong:
@@ -301,13 +296,27 @@ def edit_channel(
     changes = ", ".join(f"{a.key} = {a.item.as_string()}" for a in assignments)
     if new_text == text:
         return EditResult(config_path, target, channel, False, changes)
+    _write(config_path, new_text)
+    return EditResult(config_path, target, channel, True, changes)
+
+
+def _parse_edit(config_path: Path, new_text: str) -> GatewayConfig:
+    """The edited text as a configuration, or ``ConfigError`` saying the file is unchanged."""
+    try:
+        return parse_config(new_text, source=config_path)
+    except ConfigError as exc:
+        raise ConfigError(
+            f"refused, {config_path} is unchanged: the edit would make the configuration invalid:\n{exc}"
+        ) from None
+
+
+def _write(config_path: Path, new_text: str) -> None:
     try:
         atomic_write_text(config_path, new_text)
     except OSError as exc:
         raise ConfigError(
             f"{config_path}: cannot write: {exc.strerror or exc}; the file is unchanged"
         ) from None
-    return EditResult(config_path, target, channel, True, changes)
 
 
 def read_config_text(path: Path) -> str:
@@ -373,16 +382,6 @@ def set_device_array(
     else:
         table.add(key, array)  # tomlkit puts a plain key before the device's sub-tables
     new_text = tomlkit.dumps(document)
-    try:
-        edited = parse_config(new_text, source=config_path)
-    except ConfigError as exc:
-        raise ConfigError(
-            f"refused, {config_path} is unchanged: the edit would make the configuration invalid:\n{exc}"
-        ) from None
-    try:
-        atomic_write_text(config_path, new_text)
-    except OSError as exc:
-        raise ConfigError(
-            f"{config_path}: cannot write: {exc.strerror or exc}; the file is unchanged"
-        ) from None
+    edited = _parse_edit(config_path, new_text)
+    _write(config_path, new_text)
     return edited.buses[b].devices[d]
