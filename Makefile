@@ -2,7 +2,7 @@
 VENV    ?= .venv
 PY      := $(VENV)/bin/python
 STAMP   := $(VENV)/.installed
-SYSDEPS := socat prometheus
+SYSDEPS := socat prometheus mosquitto
 export PYTHONDONTWRITEBYTECODE := 1
 
 .PHONY: test lint bench demo venv sysdeps clean
@@ -16,12 +16,13 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 # Debian packages the integration tests use: socat (serial ptys), prometheus/promtool,
-# systemd-analyze (unit file verification).
+# systemd-analyze (unit file verification), mosquitto (a real MQTT broker).
 sysdeps:
 	@missing=""; \
 	command -v socat >/dev/null || missing="$$missing socat"; \
 	command -v promtool >/dev/null || missing="$$missing prometheus"; \
 	command -v systemd-analyze >/dev/null || missing="$$missing systemd"; \
+	command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || missing="$$missing mosquitto"; \
 	if [ -n "$$missing" ]; then \
 		echo "installing Debian packages:$$missing"; \
 		SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \

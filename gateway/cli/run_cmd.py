@@ -38,6 +38,7 @@ from ..metrics.collector import make_registry
 from ..metrics.server import MetricsServer
 from ..metrics.web_config import WebConfig, load_web_config
 from ..model import Divider
+from ..mqtt.link import MqttLink
 from ..runtime.poller import Poller, SnapshotHolder
 from ..runtime.snapshot import ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from .common import config_option
@@ -85,6 +86,9 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None)
         log.error("cannot serve metrics on %s:%s: %s", config.metrics.host, config.metrics.port, exc)
         return EXIT_CONFIG
     poller = Poller(config, holder)
+    mqtt = MqttLink(registry)
+    mqtt.apply(config)
+    holder.subscribe(mqtt.on_snapshot)
     commands: asyncio.Queue[str] = asyncio.Queue()
     loop = asyncio.get_running_loop()
     handled = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
@@ -100,6 +104,7 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None)
                 log.error("reload failed, keeping the running configuration: %s", exc)
                 continue
             report = await poller.reload(new_config)
+            mqtt.apply(new_config)
             log.info(
                 "reloaded %s (%s): %d channels keep their creep state, %d reset",
                 config_path,
@@ -114,6 +119,7 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None)
         for sig in handled:
             loop.remove_signal_handler(sig)
         await poller.stop()
+        mqtt.stop()
         server.stop()
         log.info("stopped")
     return 0

@@ -20,6 +20,7 @@ from ..errors import ConfigError
 from ..modbus.plan import MODBUS_MAX_READ, read_plan
 from ..model.params import Interval
 from .device import parse_device
+from .mqtt import parse_mqtt
 from .schema import (
     BACKOFF_INITIAL_S,
     BACKOFF_MAX_S,
@@ -46,7 +47,7 @@ from .tables import REQUIRED, Context, Table, parse_toml
 _HOST_RE: Final = re.compile(
     r"(?=.{1,253}\Z)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62}))*\.?"
 )
-ROOT_KEYS: Final = ("metrics", "bus")
+ROOT_KEYS: Final = ("metrics", "bus", "mqtt")
 _METRICS_KEYS: Final = ("address", "web_config")
 _BUS_KEYS: Final = (
     "name",
@@ -97,7 +98,8 @@ def parse_config(text: str, source: Path | None = None) -> GatewayConfig:
         raise ctx.error("bus", "at least one [[bus]] table is required")
     buses = tuple(parse_bus(ctx, path, item) for path, item in bus_items)
     check_unique_names(ctx, buses)
-    return GatewayConfig(metrics=metrics, buses=buses, source=ctx.source)
+    mqtt = parse_mqtt(ctx, root)
+    return GatewayConfig(metrics=metrics, buses=buses, source=ctx.source, mqtt=mqtt)
 
 
 def _check_private(ctx: Context, path: str, file: Path, what: str) -> None:

@@ -20,6 +20,7 @@ from ..modbus.register_map import ENCODINGS, DeviceChecks, RegisterMap
 from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
 from ..model.params import Interval
 from .layout import GridLayout
+from .mqtt import MqttConfig
 
 NO_CHECKS: Final = DeviceChecks()
 
@@ -307,6 +308,7 @@ class GatewayConfig:
     metrics: MetricsConfig
     buses: tuple[BusConfig, ...]
     source: Path | None
+    mqtt: MqttConfig | None = None  # publishing to a broker: off when None
 
     def __post_init__(self) -> None:
         buses = [b.name for b in self.buses]

@@ -24,8 +24,20 @@ ALLOWED: dict[str, set[str]] = {
     "config": {"errors", "atomic", "model", "modbus"},
     "runtime": {"errors", "model", "modbus", "config"},
     "metrics": {"errors", "runtime"},
+    "mqtt": {"errors", "config", "runtime"},
     "analysis": {"errors", "atomic", "model", "config", "runtime"},
-    "cli": {"errors", "atomic", "model", "modbus", "config", "runtime", "metrics", "analysis", "sim_device"},
+    "cli": {
+        "errors",
+        "atomic",
+        "model",
+        "modbus",
+        "config",
+        "runtime",
+        "metrics",
+        "mqtt",
+        "analysis",
+        "sim_device",
+    },
 }
 
 

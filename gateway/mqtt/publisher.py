@@ -1,0 +1,299 @@
+"""The MQTT publisher: every poll of every device as one frame, beside the poll loop.
+
+``on_snapshot`` (subscribed to the poller's ``SnapshotHolder``) only appends the new device
+snapshots to a bounded queue, so polling never waits on the broker. One thread owns the
+paho client: it connects (TLS, user and password), drives the network loop, turns queued
+snapshots into frames (``payload``) and publishes them. When the broker is slow or gone the
+queue fills and its oldest frames are dropped and counted; the thread reconnects after a
+jittered back-off (uniform in ``[0, b]``, b doubling from 0.5 s to 30 s). Sequence numbers
+count the polls of a device, so a subscriber sees a dropped frame as a gap.
+
+Topics (``docs/mqtt.md``): ``<prefix>/<gateway>/status`` (``online``/``offline``, retained,
+``offline`` as the last will), ``<prefix>/<gateway>/<device>/meta`` (retained: channels,
+positions, units, effects, encoding; republished on reload) and
+``<prefix>/<gateway>/<device>/frame``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import random
+import ssl
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import paho.mqtt.client as mqtt
+from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
+
+from ..config import GatewayConfig
+from ..config.mqtt import MqttConfig
+from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
+from .payload import encode_binary, encode_json, frame_dict
+
+__all__ = ["MqttPublisher", "MqttStats", "meta_dict"]
+
+log = logging.getLogger(__name__)
+
+BACKOFF_INITIAL_S = 0.5
+BACKOFF_MAX_S = 30.0
+KEEPALIVE_S = 15
+LOOP_TIMEOUT_S = 0.02
+STOP_FLUSH_S = 2.0
+
+
+@dataclass(frozen=True)
+class MqttStats:
+    """Counters for the metrics: frames published (acknowledged at QoS 1) and dropped, per
+    device; whether the broker connection is up; frames waiting."""
+
+    published: dict[str, int]
+    dropped: dict[str, int]
+    connected: bool
+    queued: int
+
+
+def meta_dict(config: GatewayConfig, device_name: str, encoding: str) -> dict[str, Any]:
+    """The retained description of a device's frames."""
+    _, dev = config.find_device(device_name)
+    return {
+        "device": dev.name,
+        "encoding": encoding,
+        "channels": [
+            {
+                "index": ch.index,
+                "name": ch.name,
+                "x_mm": ch.x_mm,
+                "y_mm": ch.y_mm,
+                "effects": list(ch.effects),
+            }
+            for ch in dev.enabled_channels
+        ],
+        "layout": {
+            "columns": dev.layout.columns,
+            "rows": dev.layout.rows,
+            "pitch_x_mm": dev.layout.pitch_x_mm,
+            "pitch_y_mm": dev.layout.pitch_y_mm,
+            "origin": dev.layout.origin,
+            "order": dev.layout.order,
+        },
+        "profile": dev.profile,
+        "units": {"force": "N", "resistance": "ohm", "position": "mm", "time": "s", "area": "mm^2"},
+    }
+
+
+class MqttPublisher:
+    """Publishes the frames of a configuration's devices to ``config.mqtt``'s broker."""
+
+    def __init__(
+        self,
+        config: GatewayConfig,
+        *,
+        client_factory: Callable[..., mqtt.Client] = mqtt.Client,
+        rng: random.Random | None = None,
+    ) -> None:
+        if config.mqtt is None:
+            raise ValueError("the configuration has no [mqtt] section")
+        self.settings: MqttConfig = config.mqtt
+        self._config = config
+        self._queue: deque[tuple[str, int, DeviceSnapshot]] = deque()
+        self._cond = threading.Condition()
+        self._seq: dict[str, int] = {}
+        self._last: dict[str, DeviceSnapshot] = {}
+        self._last_sent: dict[str, float] = {}
+        self._published: dict[str, int] = {}
+        self._dropped: dict[str, int] = {}
+        self._in_flight: dict[int, str] = {}
+        self._connected = False
+        self._stopping = False
+        self._meta_due = True
+        self._rng = rng or random.Random()
+        self._logged: set[str] = set()
+        self._client = self._make_client(client_factory)
+        self._thread: threading.Thread | None = None
+
+    # ------------------------------------------------------------------ the poll side
+    def on_snapshot(self, snapshot: GatewaySnapshot) -> None:
+        """Queue the devices' new snapshots (cheap: runs in the poller after each publish)."""
+        now = time.monotonic()
+        rate = self.settings.max_rate_hz
+        with self._cond:
+            for name, dev in snapshot.devices.items():
+                if self._last.get(name) is dev:
+                    continue
+                self._last[name] = dev
+                seq = self._seq.get(name, 0) + 1
+                self._seq[name] = seq
+                if rate > 0 and now - self._last_sent.get(name, -1e300) < 1.0 / rate:
+                    continue  # decimated by the configured rate: a gap by design
+                self._last_sent[name] = now
+                if len(self._queue) >= self.settings.queue_frames:
+                    old = self._queue.popleft()[0]
+                    self._dropped[old] = self._dropped.get(old, 0) + 1
+                self._queue.append((name, seq, dev))
+            self._cond.notify()
+
+    def stats(self) -> MqttStats:
+        with self._cond:
+            return MqttStats(dict(self._published), dict(self._dropped), self._connected, len(self._queue))
+
+    def reload(self, config: GatewayConfig) -> None:
+        """A new configuration of the same broker settings: republish the meta messages."""
+        with self._cond:
+            self._config = config
+            self._meta_due = True
+            self._cond.notify()
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        self._stopping = False
+        self._thread = threading.Thread(target=self._run, name="tactile-mqtt", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Say ``offline`` (retained), flush for at most ``STOP_FLUSH_S``, disconnect."""
+        with self._cond:
+            self._stopping = True
+            self._cond.notify()
+        if self._thread is not None:
+            self._thread.join(timeout=STOP_FLUSH_S + 5.0)
+            self._thread = None
+
+    # ------------------------------------------------------------------ the client thread
+    def _make_client(self, factory: Callable[..., mqtt.Client]) -> mqtt.Client:
+        s = self.settings
+        protocol = MQTTProtocolVersion.MQTTv5 if s.protocol == "5" else MQTTProtocolVersion.MQTTv311
+        client = factory(
+            callback_api_version=CallbackAPIVersion.VERSION2,
+            client_id=s.client_id,
+            protocol=protocol,
+            reconnect_on_failure=False,
+        )
+        client.will_set(s.topic("status"), "offline", qos=1, retain=True)
+        if s.username is not None:
+            password = None
+            if s.password_file is not None:
+                password = s.password_file.read_text(encoding="utf-8").rstrip("\r\n")
+            client.username_pw_set(s.username, password)
+        if s.tls is not None:
+            client.tls_set(
+                ca_certs=str(s.tls.ca_file) if s.tls.ca_file else None,
+                certfile=str(s.tls.cert_file) if s.tls.cert_file else None,
+                keyfile=str(s.tls.key_file) if s.tls.key_file else None,
+                cert_reqs=ssl.CERT_REQUIRED if s.tls.verify else ssl.CERT_NONE,
+            )
+            client.tls_insecure_set(not s.tls.verify)
+        client.max_queued_messages_set(s.queue_frames)
+        client.on_connect = self._on_connect
+        client.on_disconnect = self._on_disconnect
+        client.on_publish = self._on_publish
+        return client
+
+    def _log_once(self, message: str) -> None:
+        if message not in self._logged:
+            self._logged.add(message)
+            log.warning("%s", message)
+
+    def _on_connect(self, client: mqtt.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+        if getattr(reason, "is_failure", False):
+            self._log_once(f"mqtt: the broker {self._where()} refused the connection: {reason}")
+            return
+        log.info("mqtt: connected to %s", self._where())
+        self._logged.clear()
+        client.publish(self.settings.topic("status"), "online", qos=1, retain=True)
+        with self._cond:
+            self._connected = True
+            self._meta_due = True
+            self._cond.notify()
+
+    def _on_disconnect(self, client: mqtt.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+        with self._cond:
+            self._connected = False
+
+    def _on_publish(self, client: mqtt.Client, userdata: Any, mid: int, reason: Any, props: Any) -> None:
+        with self._cond:
+            name = self._in_flight.pop(mid, None)
+            if name is not None:
+                self._published[name] = self._published.get(name, 0) + 1
+
+    def _where(self) -> str:
+        return f"{self.settings.host}:{self.settings.port}"
+
+    def _wait(self, seconds: float) -> None:
+        with self._cond:
+            if not self._stopping:
+                self._cond.wait(seconds)
+
+    def _run(self) -> None:
+        backoff = BACKOFF_INITIAL_S
+        socket_open = False
+        while True:
+            with self._cond:
+                stopping = self._stopping
+            if stopping:
+                break
+            if not socket_open:
+                try:
+                    self._client.connect(self.settings.host, self.settings.port, keepalive=KEEPALIVE_S)
+                    socket_open = True
+                    backoff = BACKOFF_INITIAL_S
+                except (OSError, ValueError) as exc:
+                    self._log_once(f"mqtt: cannot connect to {self._where()}: {exc}")
+                    self._wait(self._rng.uniform(0.0, backoff))
+                    backoff = min(BACKOFF_MAX_S, 2.0 * backoff)
+                    continue
+            rc = self._client.loop(timeout=LOOP_TIMEOUT_S)
+            if rc != mqtt.MQTT_ERR_SUCCESS:
+                socket_open = False
+                with self._cond:
+                    self._connected = False
+                self._log_once(f"mqtt: lost the connection to {self._where()} ({mqtt.error_string(rc)})")
+                self._wait(self._rng.uniform(0.0, backoff))
+                backoff = min(BACKOFF_MAX_S, 2.0 * backoff)
+                continue
+            self._drain()
+        self._finish(socket_open)
+
+    def _drain(self) -> None:
+        """Publish what is queued while the connection is up (the meta messages first)."""
+        with self._cond:
+            if not self._connected:
+                return
+            meta_due, self._meta_due = self._meta_due, False
+            config = self._config
+            batch = list(self._queue)
+            self._queue.clear()
+        if meta_due:
+            for _, device in config.devices():
+                payload = json.dumps(meta_dict(config, device.name, self.settings.encoding))
+                self._client.publish(self.settings.topic(device.name, "meta"), payload, qos=1, retain=True)
+        for name, seq, snap in batch:
+            frame = frame_dict(snap, seq)
+            data = encode_binary(frame) if self.settings.encoding == "binary" else encode_json(frame)
+            info = self._client.publish(self.settings.topic(name, "frame"), data, qos=self.settings.qos)
+            with self._cond:
+                if info.rc != mqtt.MQTT_ERR_SUCCESS:
+                    self._dropped[name] = self._dropped.get(name, 0) + 1
+                elif self.settings.qos == 0:
+                    self._published[name] = self._published.get(name, 0) + 1
+                else:
+                    self._in_flight[info.mid] = name
+
+    def _finish(self, socket_open: bool) -> None:
+        if socket_open and self._connected:
+            self._drain()
+            info = self._client.publish(self.settings.topic("status"), "offline", qos=1, retain=True)
+            deadline = time.monotonic() + STOP_FLUSH_S
+            while time.monotonic() < deadline and (not info.is_published() or self._in_flight):
+                if self._client.loop(timeout=LOOP_TIMEOUT_S) != mqtt.MQTT_ERR_SUCCESS:
+                    break
+            self._client.disconnect()
+        with self._cond:
+            self._connected = False
+            for name, _, _ in self._queue:
+                self._dropped[name] = self._dropped.get(name, 0) + 1
+            self._queue.clear()
