@@ -97,7 +97,8 @@ def _config(
         f'[metrics]\naddress = "127.0.0.1:{free_port()}"\n\n'
         f'[mqtt]\nhost = "127.0.0.1"\nport = {broker_port}\nusername = "gw"\npassword_file = "{secret}"\n'
         f'gateway = "gw1"\ntopic_prefix = "lab/tactile"\n{extra}\n'
-        f'[[bus]]\nname = "sim"\nkind = "tcp"\nhost = "127.0.0.1"\nport = {sim_port}\npoll_interval_s = 0.05\n\n'
+        f'[[bus]]\nname = "sim"\nkind = "tcp"\nhost = "127.0.0.1"\nport = {sim_port}\n'
+        "poll_interval_s = 0.05\n\n"
         '[[bus.device]]\nname = "arr"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 4\ncolumns = 2\n'
     )
     path.chmod(0o600)
