@@ -41,6 +41,15 @@ def _number(x: float) -> float | str:
     return x if math.isfinite(x) else ("inf" if x > 0 else "-inf") if not math.isnan(x) else "nan"
 
 
+def _cell(value: float | str, width: int, spec: str) -> str:
+    """A table cell: numbers with ``spec``, the words inf/-inf/nan as they are."""
+    return f"{value:>{width}}" if isinstance(value, str) else f"{value:>{width}{spec}}"
+
+
+#: The largest force ``model eval`` evaluates (N): far beyond any sensor, below float overflow.
+MAX_EVAL_FORCE_N = 1e6
+
+
 @model.command("eval")
 @click.option("--force", "force_text", required=True, help="forces in N, e.g. 0.5,2,5 (each held from t=0)")
 @click.option("--time", "time_text", default="0", show_default=True, help="times in s, e.g. 0,600")
@@ -51,15 +60,18 @@ def eval_cmd(force_text: str, time_text: str, effects: str, params: tuple[str, .
     """Resistance of the sensor for forces held as steps from t = 0 (eq. 15-17)."""
     forces = parse_float_list(force_text, "--force")
     times = parse_float_list(time_text, "--time")
-    if any(f < 0 or not math.isfinite(f) for f in forces):
-        raise click.BadParameter("forces must be finite and >= 0 N", param_hint="--force")
+    if any(not 0.0 <= f <= MAX_EVAL_FORCE_N for f in forces):
+        raise click.BadParameter(
+            f"forces must be in [0, {MAX_EVAL_FORCE_N:g}] N (finite, not negative)", param_hint="--force"
+        )
     if any(t < 0 or not math.isfinite(t) for t in times):
         raise click.BadParameter("times must be finite and >= 0 s", param_hint="--time")
     m = _build(effects, params)
     rows = []
     for f in forces:
         for t in times:
-            b = m.held_step(np.array([f]), t)
+            with np.errstate(all="ignore"):
+                b = m.held_step(np.array([f]), t)
             rows.append(
                 {
                     "force_n": f,
@@ -77,8 +89,9 @@ def eval_cmd(force_text: str, time_text: str, effects: str, params: tuple[str, .
     click.echo(" ".join(f"{name:>{width}}" for name, width in header) + f" {'strain':>9}")
     for r in rows:
         click.echo(
-            f"{r['force_n']:>9.4g} {r['time_s']:>9.4g} {r['resistance_ohm']:>15.6g} "
-            f"{r['contact_ohm']:>12.6g} {r['polymer_ohm']:>12.6g} {r['strain']:>9.5f}"
+            f"{_cell(r['force_n'], 9, '.4g')} {_cell(r['time_s'], 9, '.4g')} "
+            f"{_cell(r['resistance_ohm'], 15, '.6g')} {_cell(r['contact_ohm'], 12, '.6g')} "
+            f"{_cell(r['polymer_ohm'], 12, '.6g')} {_cell(r['strain'], 9, '.5f')}"
         )
 
 
@@ -90,6 +103,12 @@ def eval_cmd(force_text: str, time_text: str, effects: str, params: tuple[str, .
 def invert_cmd(resistance_text: str, effects: str, params: tuple[str, ...], as_json: bool) -> None:
     """Static inverse: the force that gives each resistance with no creep state."""
     values = parse_float_list(resistance_text, "--resistance")
+    bad = [v for v in values if not v >= 0.0]
+    if bad:
+        raise click.BadParameter(
+            f"{_number(bad[0])} ohm: a resistance is >= 0 ohm (0: a short, read invalid; inf: open)",
+            param_hint="--resistance",
+        )
     m = _build(effects, params, n=len(values))
     inv = m.invert_static(np.array(values))
     rows = [
@@ -118,5 +137,11 @@ def plot_cmd(out_dir: Path, effects: str, params: tuple[str, ...]) -> None:
     from ..analysis.plots import plot_model_figures
 
     m = _build(effects, params)
-    for path in plot_model_figures(m, out_dir):
+    try:
+        paths = plot_model_figures(m, out_dir)
+    except OSError as exc:
+        raise click.ClickException(
+            f"cannot write the figures into {out_dir}: {exc.strerror or exc}"
+        ) from None
+    for path in paths:
         click.echo(str(path))

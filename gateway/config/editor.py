@@ -27,6 +27,7 @@ from ..errors import ConfigError
 from ..model import UnknownEffectError, parameter_names, parse_effects
 from .parser import parse_config
 from .schema import BusConfig, ChannelConfig, DeviceConfig, GatewayConfig
+from .tables import read_text_file
 
 __all__ = [
     "PLAIN_KEYS",
@@ -320,13 +321,9 @@ def _write(config_path: Path, new_text: str) -> None:
 
 
 def read_config_text(path: Path) -> str:
-    """The text of a configuration file (``ConfigError`` if unreadable or not UTF-8)."""
-    try:
-        return path.read_bytes().decode("utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the configuration file: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): TOML files are UTF-8") from None
+    """The text of a configuration file (``ConfigError`` if unreadable, not a regular file,
+    too large or not UTF-8)."""
+    return read_text_file(path, "configuration file")
 
 
 def flag_assignment(enabled: bool) -> Assignment:

@@ -16,7 +16,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
 
-from ..errors import ConfigError
 from ..modbus.plan import MODBUS_MAX_READ, read_plan
 from ..model.params import Interval
 from .device import parse_device
@@ -42,7 +41,7 @@ from .schema import (
     MetricsConfig,
     TlsConfig,
 )
-from .tables import REQUIRED, Context, Table, parse_toml
+from .tables import REQUIRED, Context, Table, parse_toml, read_text_file
 
 _HOST_RE: Final = re.compile(
     r"(?=.{1,253}\Z)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62}))*\.?"
@@ -76,15 +75,7 @@ _TLS_KEYS: Final = ("ca_file", "cert_file", "key_file", "server_hostname", "veri
 def load_config(path: Path) -> GatewayConfig:
     """Read and validate the configuration file ``path``; raises ``ConfigError``."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the configuration file: {exc.strerror or exc}") from None
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): TOML files are UTF-8") from None
-    return parse_config(text, source=path)
+    return parse_config(read_text_file(path, "configuration file"), source=path)
 
 
 def parse_config(text: str, source: Path | None = None) -> GatewayConfig:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import difflib
 import os
 import re
+import stat
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -32,6 +33,30 @@ __all__ = [
 _NAME_RE: Final = re.compile(r"[a-z0-9_-]{1,32}")
 _NAME_RULE: Final = "a name matching [a-z0-9_-]{1,32}"
 _BARE_KEY_RE: Final = re.compile(r"[A-Za-z0-9_-]+")
+
+
+#: A configuration, profile or calibration file larger than this is refused unread.
+MAX_FILE_BYTES: Final = 4 * 1024 * 1024
+
+
+def read_text_file(path: Path, what: str) -> str:
+    """The UTF-8 text of a regular file of at most ``MAX_FILE_BYTES``; ``ConfigError`` naming
+    the file and ``what`` it is otherwise (a device such as /dev/zero is never read)."""
+    try:
+        with open(path, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise ConfigError(f"{path}: not a regular file; a {what} is a file")
+            data = f.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise ConfigError(
+            f"{path}: larger than {MAX_FILE_BYTES // (1024 * 1024)} MiB; too large for a {what}"
+        )
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): TOML files are UTF-8") from None
 
 
 class Required:

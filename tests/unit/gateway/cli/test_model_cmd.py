@@ -53,7 +53,10 @@ def test_invert_json() -> None:
     [
         (["model", "eval", "--force", "1", "--effects", "contcat"], "did you mean 'contact'"),
         (["model", "eval", "--force", "x"], "'x' is not a number"),
-        (["model", "eval", "--force", "-1"], "forces must be finite and >= 0 N"),
+        (["model", "eval", "--force", "-1"], "forces must be in [0, 1e+06] N"),
+        (["model", "eval", "--force", "1e300"], "forces must be in [0, 1e+06] N"),
+        (["model", "invert", "--resistance", "-5"], "-5.0 ohm: a resistance is >= 0 ohm"),
+        (["model", "invert", "--resistance", "nan"], "nan ohm: a resistance is >= 0 ohm"),
         (["model", "eval", "--force", "1", "--param", "r0_ohm=-5"], "outside its allowed range"),
         (["model", "eval", "--force", "1", "--param", "r0"], "is not NAME=VALUE"),
         (["model", "invert", "--resistance", "1e4", "--param", "r0_ohms=5"], "did you mean 'r0_ohm'"),
@@ -74,3 +77,25 @@ def test_plot_writes_the_paper_figures(tmp_path: Path) -> None:
     for p in tmp_path.iterdir():
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert p.stat().st_size > 10_000
+
+
+def test_eval_table_shows_an_open_contact_as_inf() -> None:
+    """At 0 N the contact is open (eq. 12): R = inf; the table prints the word, no traceback."""
+    result = CliRunner().invoke(main, ["model", "eval", "--force", "0"])
+    assert result.exit_code == 0, result.output
+    row = result.stdout.splitlines()[1].split()
+    assert row[:3] == ["0", "0", "inf"] and row[4] == "200000"  # polymer: r0 at zero strain
+
+
+def test_eval_of_a_huge_force_prints_no_numpy_warning() -> None:
+    result = CliRunner().invoke(main, ["model", "eval", "--force", "1e6", "--json"])
+    assert result.exit_code == 0 and "RuntimeWarning" not in result.output
+    assert json.loads(result.stdout)[0]["force_n"] == 1e6
+
+
+def test_plot_where_no_folder_can_be_made_is_one_line(tmp_path: Path) -> None:
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder\n")
+    result = CliRunner().invoke(main, ["model", "plot", "--out", str(blocker / "figures")])
+    assert result.exit_code == 1 and "cannot write the figures" in result.output, result.output
+    assert "Traceback" not in result.output

@@ -293,3 +293,17 @@ def test_configs_built_in_code_are_validated_like_files() -> None:
         bus_config_for("b", "tcp", [dev, dev], host="127.0.0.1")
     with pytest.raises(ConfigError, match="duplicate"):
         gateway_config_for([bus, bus])
+
+
+def test_load_config_reads_no_device_and_no_huge_file(tmp_path: Path) -> None:
+    """``check-config -c /dev/zero`` once read without limit; a device or a file over the
+    limit is refused before it is read."""
+    from gateway.config.tables import MAX_FILE_BYTES
+
+    with pytest.raises(ConfigError, match=r"^/dev/zero: not a regular file; a configuration file is a file$"):
+        load_config(Path("/dev/zero"))
+    huge = tmp_path / "huge.toml"
+    with huge.open("wb") as f:
+        f.truncate(MAX_FILE_BYTES + 1)  # sparse: no disk used
+    with pytest.raises(ConfigError, match=r"larger than 4 MiB; too large for a configuration file"):
+        load_config(huge)
