@@ -1,24 +1,36 @@
-"""Calibration: fit a channel's model to a record and compare with the paper's line (eq. 18).
+"""Calibration: fit a channel's model to a record and put it beside its rivals.
 
-Two calibrations of the same sensor are fitted on the same training rows and judged on the
-same held-out rows: the physical model (``fitting.fit_channel``, drift-corrected inversion)
-and the paper's linear conductance calibration C = m F + n.
+The physical model (``fitting.fit_channel``, drift-corrected inversion) is fitted with
+residuals weighted by the record's measurement model (``measurement``), over the force range
+the record spans (written to the calibration file as ``force_min_n``/``force_max_n``). When the
+record has loading and unloading, ``hysteresis`` is tried and kept only if it reads the
+held-out force better. The paper's conductance line C = m F + n and a monotone lookup
+(``rivals``) are fitted on the same training rows and judged on the same held-out rows; the
+report says plainly which reads force best, and ``model="line"|"lookup"|"auto"`` writes a
+rival as the channel's model (``docs/calibration.md``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..atomic import atomic_write_text
-from ..model import ConductanceLine, SensorParams, parameter_names
+from ..model import SensorParams, parameter_names, parse_effects
+from .diagnostics import residual_axes
+from .discrepancy import decimate
 from .fitting import FitData, FitResult, fit_channel
+from .measurement import NoiseModel, noise_model, time_is_real
 from .records import ChannelRecord
+from .rivals import Rivals, verdict
+
+MODELS = ("physics", "line", "lookup", "auto")
+TIME_EFFECTS = ("creep", "creep2")
 
 
 @dataclass(frozen=True)
@@ -28,13 +40,43 @@ class Calibration:
     channel: str
     record: str
     fit: FitResult
-    line: ConductanceLine
-    line_force_rms_n: float
+    rivals: Rivals
     unusable: dict[str, int]
+    noise: NoiseModel
+    noise_floor_log: float
+    noise_floor_force_n: float
+    force_range_n: tuple[float, float]
+    configured_range_n: tuple[float, float]
+    rows_outside_configured: int
+    fit_before: FitResult | None = None  # the fit without hysteresis, when hysteresis was tried
+    notes: tuple[str, ...] = field(default=())
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def line_force_rms_n(self) -> float:
+        return self.rivals.line_force_rms_n
+
+    def force_rms(self) -> dict[str, float]:
+        return {
+            "physics": self.fit.gap_test.force_rms_n,
+            "line": self.rivals.line_force_rms_n,
+            "lookup": self.rivals.lookup_force_rms_n,
+        }
+
+    @property
+    def best(self) -> str:
+        """The calibration that reads held-out force best (physics on a tie within 2 %)."""
+        rms = {k: (v if math.isfinite(v) else math.inf) for k, v in self.force_rms().items()}
+        best = min(rms, key=lambda k: rms[k])
+        return "physics" if rms["physics"] <= 1.02 * rms[best] else best
+
+    @property
+    def verdict(self) -> str:
+        return verdict(self.fit.gap_test.force_rms_n, self.rivals.line_force_rms_n)
 
     def as_dict(self) -> dict[str, Any]:
         fit = self.fit
-        return {
+        out: dict[str, Any] = {
             "record": self.record,
             "channel": self.channel,
             "effects": list(fit.effects),
@@ -56,11 +98,43 @@ class Calibration:
             "fit_quality": {"train": fit.gap_train.as_dict(), "held_out": fit.gap_test.as_dict()},
             "rows": {"train": fit.n_train, "held_out": fit.n_test, "unusable": self.unusable},
             "conductance_line": {
-                "slope_s_per_n": self.line.slope_s_per_n,
-                "intercept_s": self.line.intercept_s,
-                "held_out_force_rms_n": self.line_force_rms_n,
+                "slope_s_per_n": self.rivals.line.slope_s_per_n,
+                "intercept_s": self.rivals.line.intercept_s,
+                "held_out_force_rms_n": self.rivals.line_force_rms_n,
             },
+            "lookup": {"held_out_force_rms_n": self.rivals.lookup_force_rms_n},
+            "held_out_force_rms_n": self.force_rms(),
+            "best": self.best,
+            "verdict": self.verdict,
+            "noise": {
+                "estimated": self.noise.estimated,
+                "description": self.noise.describe(),
+                "rel_noise": self.noise.rel_noise,
+                "floor_log_resistance": self.noise_floor_log,
+                "floor_force_n": self.noise_floor_force_n,
+            },
+            "force_range_n": list(self.force_range_n),
+            "configured_force_range_n": list(self.configured_range_n),
+            "rows_outside_configured_range": self.rows_outside_configured,
+            "notes": list(self.notes),
+            "warnings": list(self.warnings),
         }
+        if self.fit_before is not None:
+            out["without_hysteresis"] = {
+                "effects": list(self.fit_before.effects),
+                "held_out": self.fit_before.gap_test.as_dict(),
+            }
+        return out
+
+
+def has_both_directions(data: FitData, share: float = 0.1) -> bool:
+    """Does the record load and unload (each direction on at least ``share`` of loaded rows)?"""
+    d = residual_axes(data)["direction"]
+    loaded = data.usable & (data.force_n > 0)
+    n = max(int(np.count_nonzero(loaded)), 1)
+    return bool(
+        np.count_nonzero(loaded & (d > 0)) >= share * n and np.count_nonzero(loaded & (d < 0)) >= share * n
+    )
 
 
 def calibrate(
@@ -68,51 +142,144 @@ def calibrate(
     effects: Iterable[str] = ("tunneling", "contact", "creep"),
     prior: SensorParams | None = None,
     record_name: str = "",
+    metadata: Mapping[str, str] | None = None,
+    try_hysteresis: bool = True,
 ) -> Calibration:
-    """Fit the model and the conductance line to one channel of a record."""
-    data = FitData.from_channel(channel)
+    """Fit the model and its rivals to one channel of a record."""
+    meta = dict(metadata or {})
+    prior = prior or SensorParams()
+    notes: list[str] = []
+    warnings: list[str] = []
+    chosen = parse_effects(effects)
+    if not time_is_real(meta) and any(e in chosen for e in TIME_EFFECTS):
+        dropped = [e for e in chosen if e in TIME_EFFECTS]
+        chosen = parse_effects(e for e in chosen if e not in TIME_EFFECTS)
+        notes.append(
+            f"{', '.join(dropped)} left out: the record has no real time (# time: {meta.get('time', '')})"
+        )
+    small = decimate(channel)
+    if small.n_samples < channel.n_samples:
+        notes.append(f"fitted on every {channel.n_samples // small.n_samples}th row ({small.n_samples} rows)")
+    if small.force_n is None:
+        raise ValueError(f"channel {channel.name!r} has no force_n column: a fit needs the reference force")
+    noise = noise_model(meta, small.force_n, small.resistance_ohm)
+    if noise.estimated:
+        notes.append("no front-end metadata: " + noise.describe())
+    data = FitData.from_channel(small, sigma_log=noise.sigma_log)
     if not data.train.any() or not data.test.any():
         raise ValueError(
             f"channel {channel.name!r}: not enough usable rows to fit and to hold out "
             f"({int(data.train.sum())} training, {int(data.test.sum())} held-out rows)"
         )
-    fit = fit_channel(data, effects, prior)
-    train = data.train
-    line = ConductanceLine.fit(data.force_n[train], data.resistance_ohm[train])
-    err = line.force(data.resistance_ohm[data.test]) - data.force_n[data.test]
+    loaded = data.force_n[data.usable]
+    lo, hi = float(loaded.min()), float(loaded.max())
+    configured = (prior.force_min_n, prior.force_max_n)
+    assert channel.force_n is not None
+    outside = int(
+        np.count_nonzero(
+            (channel.force_n > configured[1]) | ((channel.force_n > 0) & (channel.force_n < configured[0]))
+        )
+    )
+    if hi > configured[1]:
+        warnings.append(
+            f"the record's forces reach {hi:.4g} N, above the configured force_max_n = {configured[1]:g} N: "
+            f"{outside} rows would read as saturated (capped); the fit uses and writes the record's "
+            f"range {lo:.3g}-{hi:.4g} N"
+        )
+    ranged = replace(prior, force_min_n=min(lo, hi * 0.999), force_max_n=hi)
+    fit = fit_channel(data, chosen, ranged)
+    before = None
+    if try_hysteresis and "hysteresis" not in chosen and has_both_directions(data):
+        with_h = fit_channel(data, (*chosen, "hysteresis"), ranged)
+        before = fit
+        if with_h.gap_test.force_rms_n < fit.gap_test.force_rms_n:
+            fit = with_h
+            notes.append(
+                "hysteresis added (the record loads and unloads): held-out force RMS "
+                f"{before.gap_test.force_rms_n:.4g} -> {with_h.gap_test.force_rms_n:.4g} N"
+            )
+        else:
+            notes.append(
+                "hysteresis tried (the record loads and unloads) and left out: held-out force RMS "
+                f"{fit.gap_test.force_rms_n:.4g} N without, {with_h.gap_test.force_rms_n:.4g} N with it"
+            )
+    rivals = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test)
+    test = data.test
     return Calibration(
         channel=channel.name,
         record=record_name,
         fit=fit,
-        line=line,
-        line_force_rms_n=float(np.sqrt(np.mean(err * err))),
+        rivals=rivals,
         unusable=channel.unusable_counts(),
+        noise=noise,
+        noise_floor_log=noise.floor_log(test),
+        noise_floor_force_n=rivals.force_noise_floor_n(noise.sigma_log[test], data.resistance_ohm[test]),
+        force_range_n=(ranged.force_min_n, ranged.force_max_n),
+        configured_range_n=configured,
+        rows_outside_configured=outside,
+        fit_before=before,
+        notes=tuple(notes),
+        warnings=tuple(warnings),
     )
 
 
-def calibration_toml(calibrations: Iterable[Calibration]) -> str:
-    """A calibration file: ``[channel.<name>]`` tables the gateway config can reference."""
+def calibration_toml(
+    calibrations: Iterable[Calibration], model: str = "physics", names: Mapping[str, str] | None = None
+) -> str:
+    """A calibration file: ``[channel.<name>]`` parameter tables the gateway config reads, and
+    for a channel whose chosen model is a rival, a ``[line.<name>]`` or ``[lookup.<name>]``
+    table (``docs/calibration.md``; the runtime does not read these yet)."""
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
     items = list(calibrations)
+    rename = dict(names or {})
     lines = ["# Written by `tactile-gateway calibrate`; the gateway reads the [channel.<name>] tables."]
     if items:
         effects = ", ".join(f'"{e}"' for e in items[0].fit.effects)
         lines += ["", "[meta]", f'record = "{items[0].record}"', f"effects = [{effects}]"]
-    names = set(parameter_names())
+    known = set(parameter_names())
+    rivals: list[str] = []
     for cal in items:
-        lines += ["", f'[channel."{cal.channel}"]']
+        name = rename.get(cal.channel, cal.channel)
+        kind = cal.best if model == "auto" else model
+        lines += ["", f'[channel."{name}"]', f"# model: {kind} ({cal.verdict})"]
         for est in cal.fit.estimates:
-            if est.name in names:
+            if est.name in known:
                 lines.append(f"{est.name} = {_toml_float(est.value)}")
-    return "\n".join(lines) + "\n"
+        lines.append(f"force_min_n = {_toml_float(cal.force_range_n[0])}")
+        lines.append(f"force_max_n = {_toml_float(cal.force_range_n[1])}")
+        if kind == "line":
+            rivals += [
+                "",
+                f'[line."{name}"]',
+                f"slope_s_per_n = {_toml_float(cal.rivals.line.slope_s_per_n)}",
+                f"intercept_s = {_toml_float(cal.rivals.line.intercept_s)}",
+                f"held_out_force_rms_n = {_toml_float(cal.rivals.line_force_rms_n)}",
+            ]
+        elif kind == "lookup":
+            lk = cal.rivals.lookup
+            rivals += [
+                "",
+                f'[lookup."{name}"]',
+                "resistance_ohm = [" + ", ".join(_toml_float(math.exp(x)) for x in lk.log_r) + "]",
+                "force_n = [" + ", ".join(_toml_float(f) for f in lk.force_n) + "]",
+                f"held_out_force_rms_n = {_toml_float(cal.rivals.lookup_force_rms_n)}",
+            ]
+    return "\n".join(lines + rivals) + "\n"
 
 
 def _toml_float(value: float) -> str:
     return "inf" if math.isinf(value) else repr(float(value))
 
 
-def write_calibration(path: Path, calibrations: Iterable[Calibration]) -> None:
+def write_calibration(
+    path: Path,
+    calibrations: Iterable[Calibration],
+    model: str = "physics",
+    names: Mapping[str, str] | None = None,
+) -> None:
     """Write the calibration file atomically."""
-    atomic_write_text(path, calibration_toml(calibrations))
+    atomic_write_text(path, calibration_toml(calibrations, model, names))
 
 
 def format_report(cal: Calibration) -> str:
@@ -120,6 +287,15 @@ def format_report(cal: Calibration) -> str:
     fit = cal.fit
     out = [f"channel {cal.channel} of {cal.record}: effects {', '.join(fit.effects)}"]
     out.append(f"rows: {fit.n_train} training, {fit.n_test} held out, unusable {cal.unusable}")
+    lo, hi = cal.force_range_n
+    out.append(
+        f"force range fitted and written: {lo:.3g}-{hi:.4g} N (configured {cal.configured_range_n[0]:g}-"
+        f"{cal.configured_range_n[1]:g} N; {cal.rows_outside_configured} rows outside it, none capped in "
+        "the fit-quality numbers)"
+    )
+    out += [f"WARNING: {w}" for w in cal.warnings]
+    out += [f"note: {n}" for n in cal.notes]
+    out.append(f"measurement model: {cal.noise.describe()}")
     out.append("")
     out.append(f"{'parameter':<24} {'value':>12} {'95 % interval':>27}  note")
     for e in fit.estimates:
@@ -137,11 +313,23 @@ def format_report(cal: Calibration) -> str:
             sign = "+" if fit.correlation[i, j] >= 0 else "-"
             out.append(f"  {fit.correlation_names[i]} ~ {fit.correlation_names[j]}: {sign}{value:.3f}")
     out.append("")
-    out.append("held-out data                      log-resistance RMS   force RMS (N)")
+    out.append(f"held-out data ({fit.n_test} rows)             log-resistance RMS   force RMS (N)")
+    if cal.fit_before is not None and cal.fit_before is not fit:
+        g = cal.fit_before.gap_test
+        out.append(
+            f"  physical model without hysteresis {g.log_resistance_rms:>17.4f} {g.force_rms_n:>15.4f}"
+        )
     out.append(
         f"  physical model (drift-corrected) {fit.gap_test.log_resistance_rms:>18.4f} "
         f"{fit.gap_test.force_rms_n:>15.4f}"
     )
-    out.append(f"  conductance line C = m F + n     {'-':>18} {cal.line_force_rms_n:>15.4f}")
-    out.append(f"    m = {cal.line.slope_s_per_n:.6g} S/N, n = {cal.line.intercept_s:.6g} S")
+    out.append(f"  conductance line C = m F + n     {'-':>18} {cal.rivals.line_force_rms_n:>15.4f}")
+    out.append(f"  monotone lookup F(ln R)          {'-':>18} {cal.rivals.lookup_force_rms_n:>15.4f}")
+    out.append(
+        f"  noise floor (measurement model)  {cal.noise_floor_log:>18.4f} {cal.noise_floor_force_n:>15.4f}"
+    )
+    out.append(f"    m = {cal.rivals.line.slope_s_per_n:.6g} S/N, n = {cal.rivals.line.intercept_s:.6g} S")
+    out.append(f"verdict: {cal.verdict}; best on held-out force: {cal.best}")
+    if cal.best != "physics":
+        out.append(f"  (write it as the channel's model with --model {cal.best} or --model auto)")
     return "\n".join(out)

@@ -16,16 +16,19 @@ The JSON summary keeps the keys and meanings of ``docs/record-format.md``.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..model import EFFECT_NAMES, SensorParams, parse_effects
+from .diagnostics import OPEN_CIRCUIT_OHM, Finding, describe_gaps
 from .fitting import FitData, FitResult, Gap, fit_channel, parameters_for
+from .measurement import noise_model, time_is_real
 from .records import ChannelRecord
+from .rivals import Rivals
 
 FloatArray = NDArray[np.float64]
 
@@ -33,13 +36,15 @@ FloatArray = NDArray[np.float64]
 MIN_RELATIVE_GAIN = 0.015
 #: ... and its penalized held-out score by at least this much (like a BIC difference).
 MIN_SCORE_GAIN = 30.0
-#: Readings above this are open circuits for the zero-force consistency check (a 10 kohm
-#: divider with a 16-bit converter cannot tell 100 Mohm from open).
-OPEN_CIRCUIT_OHM = 1e8
 #: Added to the unloaded rows' mean squared log residual: 1 % in resistance, squared.
 UNLOADED_MSE_FLOOR = 1e-4
 #: The runner-up is "indistinguishable" when it achieves this share of the best gain.
 AMBIGUOUS_SHARE = 0.85
+#: A candidate that raises the held-out force RMS by more than this share, plus a quarter of the
+#: force noise floor (smaller changes cannot be told from noise), is not added.
+FORCE_TOLERANCE = 0.02
+FORCE_FLOOR_SHARE = 0.25
+TIME_EFFECTS = ("creep", "creep2")
 MAX_FIT_ROWS = 6000
 
 _SEPARATING_MEASUREMENT: dict[frozenset[str], str] = {
@@ -69,17 +74,6 @@ _DEFAULT_MEASUREMENT = (
 def separating_measurement(a: str, b: str) -> str:
     """The measurement that would tell effects ``a`` and ``b`` apart, in words."""
     return _SEPARATING_MEASUREMENT.get(frozenset({a, b}), _DEFAULT_MEASUREMENT)
-
-
-@dataclass(frozen=True)
-class Finding:
-    """One systematic disagreement, in numbers and in words."""
-
-    axis: str  # force, time_since_change, direction, temperature, cycle
-    label: str
-    mean_log_residual: float
-    n_rows: int
-    sentence: str
 
 
 @dataclass(frozen=True)
@@ -117,6 +111,22 @@ class DiscrepancyReport:
     steps: tuple[Step, ...]
     final_fit: FitResult
     notes: tuple[str, ...] = field(default=())
+    rivals: Rivals | None = None
+    noise_floor_log: float = math.nan
+    noise_description: str = ""
+
+    def rival_summary(self) -> str:
+        """The final model beside the line and the lookup on the same held-out rows, in words."""
+        if self.rivals is None:
+            return "no conductance line could be fitted"
+        from .rivals import verdict
+
+        model = self.final_fit.gap_test.force_rms_n
+        line, lookup = self.rivals.line_force_rms_n, self.rivals.lookup_force_rms_n
+        return (
+            f"held-out force RMS: model {model:.4g} N, conductance line {line:.4g} N, "
+            f"monotone lookup {lookup:.4g} N; {verdict(model, line)}"
+        )
 
     @property
     def added(self) -> list[str]:
@@ -153,6 +163,18 @@ class DiscrepancyReport:
             "channel": self.channel,
             "candidates": list(self.candidates),
             "notes": list(self.notes),
+            "rivals": None
+            if self.rivals is None
+            else {
+                "line_force_rms_n": self.rivals.line_force_rms_n,
+                "lookup_force_rms_n": self.rivals.lookup_force_rms_n,
+                "model_force_rms_n": self.final_fit.gap_test.force_rms_n,
+                "verdict": self.rival_summary(),
+            },
+            "noise": {"floor_log_resistance": self.noise_floor_log, "description": self.noise_description},
+            "ambiguous": [
+                {"added": s.added, "runner_up": s.ambiguous_with} for s in self.steps if s.ambiguous_with
+            ],
         }
 
 
@@ -187,13 +209,24 @@ def decimate(channel: ChannelRecord, max_rows: int = MAX_FIT_ROWS) -> ChannelRec
     )
 
 
-def default_candidates(channel: ChannelRecord, effects: Sequence[str]) -> tuple[tuple[str, ...], list[str]]:
-    """Every spec effect not yet in the model; ``temperature`` only where the record has it.
+def default_candidates(
+    channel: ChannelRecord, effects: Sequence[str], real_time: bool = True
+) -> tuple[tuple[str, ...], list[str]]:
+    """Every spec effect not yet in the model; ``temperature`` only where the record has it,
+    ``creep``/``creep2`` only where it has real time.
 
     ``creep2`` is a *second* Kelvin element, so it is a candidate once ``creep`` is in.
     """
     notes: list[str] = []
     out = [e for e in EFFECT_NAMES if e != "tunneling" and e not in effects]
+    if not real_time:
+        gone = [e for e in out if e in TIME_EFFECTS]
+        out = [e for e in out if e not in TIME_EFFECTS]
+        if gone:
+            notes.append(
+                f"{', '.join(gone)} not candidates: the record has no real time (its metadata says "
+                "'time: none' or a sample index), so time-dependent effects cannot be identified"
+            )
     if "creep" not in effects and "creep2" in out:
         out.remove("creep2")
     temps = channel.temperature_c
@@ -214,20 +247,32 @@ def run_discrepancy(
     prior: SensorParams | None = None,
     record_name: str = "",
     max_steps: int = 6,
+    metadata: Mapping[str, str] | None = None,
 ) -> DiscrepancyReport:
     """Run the workflow on one channel (see the module docstring)."""
+    meta = dict(metadata or {})
+    real_time = time_is_real(meta)
     base = parse_effects(baseline)
     notes: list[str] = []
     if candidates is None:
-        pool, why = default_candidates(channel, base)
+        pool, why = default_candidates(channel, base, real_time)
         notes.extend(why)
     else:
         pool = tuple(e for e in parse_effects(candidates) if e != "tunneling" and e not in base)
+        if not real_time and any(e in TIME_EFFECTS for e in pool):
+            notes.append("creep/creep2 not candidates: the record has no real time")
+            pool = tuple(e for e in pool if e not in TIME_EFFECTS)
     small = decimate(channel)
     if small.n_samples < channel.n_samples:
         notes.append(f"fitted on every {channel.n_samples // small.n_samples}th row ({small.n_samples} rows)")
-    data = FitData.from_channel(small)
+    data, prior, extra = prepare(small, meta, prior)
+    notes.extend(extra)
     current = base
+    try:
+        rivals: Rivals | None = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test)
+    except ValueError:
+        rivals = None
+    force_floor = _force_floor(data, rivals)
     fit = fit_channel(data, current, prior)
     steps: list[Step] = []
     remaining = list(pool)
@@ -239,7 +284,7 @@ def run_discrepancy(
                 key=lambda c: c.score,
             )
         )
-        decision, evidence, ambiguous = _decide(fit, data, scored, findings)
+        decision, evidence, ambiguous = _decide(fit, data, scored, findings, force_floor)
         steps.append(Step(current, fit, findings, scored, decision, evidence, ambiguous))
         if decision is None:
             break
@@ -256,6 +301,7 @@ def run_discrepancy(
         if not remaining:
             steps.append(Step(current, fit, describe_gaps(data, fit), (), None, "no candidates left"))
             break
+    floor = _floor(data)
     return DiscrepancyReport(
         record=record_name,
         channel=channel.name,
@@ -264,7 +310,54 @@ def run_discrepancy(
         steps=tuple(steps),
         final_fit=fit,
         notes=tuple(notes),
+        rivals=rivals,
+        noise_floor_log=floor,
+        noise_description=extra_description(small, meta),
     )
+
+
+def prepare(
+    channel: ChannelRecord, metadata: Mapping[str, str], prior: SensorParams | None
+) -> tuple[FitData, SensorParams, list[str]]:
+    """Fit data weighted by the measurement model, and a prior whose force range covers the record."""
+    notes: list[str] = []
+    prior = prior or SensorParams()
+    if channel.force_n is None:
+        return FitData.from_channel(channel), prior, notes
+    noise = noise_model(metadata, channel.force_n, channel.resistance_ohm)
+    if noise.estimated:
+        notes.append("no front-end metadata: " + noise.describe())
+    data = FitData.from_channel(channel, sigma_log=noise.sigma_log)
+    loaded = data.force_n[data.usable]
+    if loaded.size and float(loaded.max()) > prior.force_max_n:
+        notes.append(
+            f"the record's forces reach {float(loaded.max()):.4g} N, above force_max_n = "
+            f"{prior.force_max_n:g} N: the range is widened to the record's for the fit"
+        )
+        prior = replace(prior, force_max_n=float(loaded.max()))
+    return data, prior, notes
+
+
+def extra_description(channel: ChannelRecord, metadata: Mapping[str, str]) -> str:
+    f = channel.force_n
+    return "" if f is None else noise_model(metadata, f, channel.resistance_ohm).describe()
+
+
+def _force_floor(data: FitData, rivals: Rivals | None) -> float:
+    """The held-out force RMS the log-R noise alone causes (0 when unknown)."""
+    if rivals is None or data.sigma_log is None:
+        return 0.0
+    rows = data.test & (data.force_n > 0)
+    value = rivals.force_noise_floor_n(data.sigma_log[rows], data.resistance_ohm[rows])
+    return value if math.isfinite(value) else 0.0
+
+
+def _floor(data: FitData) -> float:
+    if data.sigma_log is None:
+        return math.nan
+    s = data.sigma_log[data.test & (data.force_n > 0)]
+    s = s[np.isfinite(s)]
+    return float(np.sqrt(np.mean(s * s))) if s.size else math.nan
 
 
 def _score(
@@ -292,11 +385,14 @@ def _penalized(fit: FitResult, data: FitData) -> float:
     score = fit.n_parameters * math.log(max(fit.n_train, 2))
     loaded = data.held_out & data.usable & (data.force_n > 0.0)
     unloaded = data.held_out & (data.force_n <= 0.0)
+    weights = data.weights()
     for rows, floor in ((loaded, 0.0), (unloaded, UNLOADED_MSE_FLOOR)):
         with np.errstate(divide="ignore", invalid="ignore"):
             measured = np.log(np.minimum(data.resistance_ohm[rows], OPEN_CIRCUIT_OHM))
             model = np.log(np.minimum(fit.model_ohm[rows], OPEN_CIRCUIT_OHM))
         res = measured - model
+        if floor == 0.0:
+            res = res * weights[rows]
         res = res[np.isfinite(res)]
         if res.size == 0:
             continue
@@ -308,153 +404,96 @@ def _penalized(fit: FitResult, data: FitData) -> float:
 
 
 def _decide(
-    fit: FitResult, data: FitData, scored: Sequence[CandidateScore], findings: Sequence[Finding]
+    fit: FitResult,
+    data: FitData,
+    scored: Sequence[CandidateScore],
+    findings: Sequence[Finding],
+    force_floor: float = 0.0,
 ) -> tuple[str | None, str, str | None]:
+    """The candidate to add (or None), the evidence in words, and the runner-up when they tie.
+
+    A candidate must win on held-out log-R (score and relative gain) and must not make the
+    held-out force worse. When the runner-up gains nearly as much, the better one is still
+    added and the runner-up named; the separating measurement is named only when the record
+    lacks it.
+    """
     if not scored:
         return None, "no candidates to try", None
     now = _penalized(fit, data)
     now_rms = fit.gap_test.log_resistance_rms
-    best = scored[0]
+    now_force = fit.gap_test.force_rms_n
+    table = "; ".join(
+        f"{c.effect} {c.gap_test.log_resistance_rms:.4f} / {c.gap_test.force_rms_n:.4g} N" for c in scored
+    )
+    worse_force = [c.effect for c in scored if _worse_force(c.gap_test.force_rms_n, now_force, force_floor)]
+    eligible = [c for c in scored if c.effect not in worse_force]
+    skipped = (
+        f"; not added because they make the held-out force worse: {', '.join(worse_force)}"
+        if worse_force
+        else ""
+    )
+    if not eligible:
+        return (
+            None,
+            f"no candidate helps the force: now {now_rms:.4f} / {now_force:.4g} N; {table}{skipped}",
+            None,
+        )
+    best = eligible[0]
     gain = now - best.score
     rel = 1.0 - best.gap_test.log_resistance_rms / now_rms if now_rms > 0 else 0.0
-    table = "; ".join(f"{c.effect} {c.gap_test.log_resistance_rms:.4f}" for c in scored)
     if gain < MIN_SCORE_GAIN or rel < MIN_RELATIVE_GAIN:
         return (
             None,
-            f"no candidate helps clearly: held-out log-resistance RMS {now_rms:.4f} now; "
-            f"with each candidate: {table}",
+            f"no candidate helps clearly: held-out log-resistance RMS / force RMS {now_rms:.4f} / "
+            f"{now_force:.4g} N now; with each candidate: {table}{skipped}",
             None,
         )
-    if len(scored) > 1:
-        second = scored[1]
+    runner_up = None
+    tie = ""
+    if len(eligible) > 1:
+        second = eligible[1]
         gain2 = now - second.score
         rel2 = 1.0 - second.gap_test.log_resistance_rms / now_rms
         if gain2 >= AMBIGUOUS_SHARE * gain and rel2 >= AMBIGUOUS_SHARE * rel:
-            return (
-                None,
-                f"{best.effect} and {second.effect} cannot be told apart with this record (held-out RMS "
-                f"{best.gap_test.log_resistance_rms:.4f} vs {second.gap_test.log_resistance_rms:.4f}); "
-                f"to separate them, record {separating_measurement(best.effect, second.effect)}",
-                second.effect,
+            runner_up = second.effect
+            tie = (
+                f"; {second.effect} fits nearly as well (held-out log-R RMS "
+                f"{second.gap_test.log_resistance_rms:.4f} against {best.gap_test.log_resistance_rms:.4f}), "
+                f"{best.effect} is added as the better one"
             )
+            missing = _missing_measurement(data, best.effect, second.effect)
+            if missing:
+                tie += f"; to separate them, record {missing}"
     where = f" ({findings[0].sentence})" if findings else ""
     evidence = (
-        f"held-out log-resistance RMS {now_rms:.4f} -> {best.gap_test.log_resistance_rms:.4f} with "
-        f"{best.effect} (+{best.added_parameters} parameters, score {best.score - now:+.1f}){where}; "
-        f"all candidates: {table}"
+        f"held-out log-resistance RMS {now_rms:.4f} -> {best.gap_test.log_resistance_rms:.4f} and force RMS "
+        f"{now_force:.4g} -> {best.gap_test.force_rms_n:.4g} N with {best.effect} (+{best.added_parameters} "
+        f"parameters, score {now:.1f} -> {best.score:.1f}){where}{tie}; all candidates: {table}{skipped}"
     )
-    return best.effect, evidence, None
+    return best.effect, evidence, runner_up
 
 
-# ------------------------------------------------------------------------- diagnostics
-def residual_axes(data: FitData) -> dict[str, FloatArray]:
-    """Per-row coordinates along which residuals are examined."""
-    t, f = data.time_s, data.force_n
-    change = np.flatnonzero(np.abs(np.diff(f)) > 1e-9) + 1
-    last_change = np.zeros(t.size, dtype=np.int64)
-    if change.size:
-        idx = np.searchsorted(change, np.arange(t.size), side="right") - 1
-        last_change = np.where(idx >= 0, change[np.maximum(idx, 0)], 0)
-    since = t - t[last_change]
-    step = np.diff(f, prepend=f[0])
-    direction = np.zeros(t.size)
-    moving = np.flatnonzero(np.abs(step) > 1e-9)
-    if moving.size:
-        idx = np.searchsorted(moving, np.arange(t.size), side="right") - 1
-        direction = np.where(idx >= 0, np.sign(step[moving[np.maximum(idx, 0)]]), 0.0)
-    level = float(np.median(f[f > 0])) if np.any(f > 0) else 0.0
-    ups = np.flatnonzero((f[1:] >= level) & (f[:-1] < level)) + 1
-    cycle = np.searchsorted(ups, np.arange(t.size), side="right").astype(np.float64)
-    axes = {"force": f, "time_since_change": since, "direction": direction, "cycle": cycle}
-    if data.temperature_c is not None:
-        axes["temperature"] = data.temperature_c
-    return axes
+def _worse_force(candidate: float, now: float, force_floor: float = 0.0) -> bool:
+    if not (math.isfinite(candidate) and math.isfinite(now)):
+        return False
+    return candidate > now * (1.0 + FORCE_TOLERANCE) + max(1e-3, FORCE_FLOOR_SHARE * force_floor)
 
 
-def describe_gaps(data: FitData, fit: FitResult, limit: int = 4) -> tuple[Finding, ...]:
-    """The largest systematic disagreements, most significant first."""
-    res = fit.log_residual
-    rows = data.usable & np.isfinite(res)
-    if not rows.any():
-        return ()
-    noise = float(np.std(np.diff(res[rows]))) / math.sqrt(2.0) or 1e-12
-    axes = residual_axes(data)
-    findings: list[tuple[float, Finding]] = []
+def _missing_measurement(data: FitData, a: str, b: str) -> str:
+    """The separating measurement, or "" when the record already has it (force span for the
+    force-range pairs)."""
+    pair = frozenset({a, b})
+    loaded = data.force_n[data.usable & (data.force_n > 0)]
+    spans = (
+        loaded.size and float(np.percentile(loaded, 2)) <= 0.25 and float(np.percentile(loaded, 98)) >= 7.0
+    )
+    if spans and pair in _FORCE_RANGE_PAIRS:
+        return ""
+    return separating_measurement(a, b)
 
-    def add(axis: str, label: str, mask: NDArray[np.bool_], words: str) -> None:
-        m = mask & rows
-        n = int(np.count_nonzero(m))
-        if n < 10:
-            return
-        mean = float(np.mean(res[m]))
-        z = abs(mean) / (noise / math.sqrt(n))
-        pct = 100.0 * math.expm1(mean)
-        if abs(pct) < 1.0 or z < 5.0:
-            return
-        side = "above" if mean > 0 else "below"
-        findings.append(
-            (
-                z,
-                Finding(
-                    axis,
-                    label,
-                    mean,
-                    n,
-                    f"{words} the measured resistance is {abs(pct):.0f} % {side} the model",
-                ),
-            )
-        )
 
-    f = axes["force"]
-    pos = f[rows & (f > 0)]
-    if pos.size:
-        edges = np.geomspace(max(float(pos.min()), 1e-3), float(pos.max()) * 1.0001, 5)
-        names = ["at low force", "at low-mid force", "at mid-high force", "at high force"]
-        for i in range(4):
-            add(
-                "force",
-                f"{edges[i]:.2g}-{edges[i + 1]:.2g} N",
-                (f >= edges[i]) & (f < edges[i + 1]),
-                f"{names[i]} ({edges[i]:.2g}-{edges[i + 1]:.2g} N)",
-            )
-    since = axes["time_since_change"]
-    for lo, hi, words in (
-        (0, 5, "within 5 s of a load change"),
-        (5, 60, "5-60 s after a load change"),
-        (60, 600, "1-10 min into a hold"),
-        (600, math.inf, "after 10 min of holding"),
-    ):
-        add("time_since_change", f"{lo}-{hi} s", (since >= lo) & (since < hi) & (f > 0), words)
-    d = axes["direction"]
-    add("direction", "loading", d > 0, "while loading")
-    add("direction", "unloading", (d < 0) & (f > 0), "while unloading")
-    if "temperature" in axes:
-        temp = axes["temperature"]
-        ref = float(np.median(temp[rows]))
-        add("temperature", f"above {ref + 2:.0f} °C", temp > ref + 2.0, f"above {ref + 2:.0f} °C")
-        add("temperature", f"below {ref - 2:.0f} °C", temp < ref - 2.0, f"below {ref - 2:.0f} °C")
-    cycle = axes["cycle"]
-    if cycle.max() >= 3:
-        add("cycle", "first cycle", cycle <= 1, "in the first load cycle")
-        add("cycle", "later cycles", cycle >= 3, "in the later load cycles")
-    unloaded = data.force_n <= 0.0
-    if unloaded.any() and fit.model_ohm.size:
-        measured_open = data.resistance_ohm[unloaded] >= OPEN_CIRCUIT_OHM
-        model_open = fit.model_ohm[unloaded] >= OPEN_CIRCUIT_OHM
-        n_bad = int(np.count_nonzero(measured_open != model_open))
-        if n_bad >= 5:
-            if np.count_nonzero(measured_open & ~model_open) >= np.count_nonzero(~measured_open & model_open):
-                model_r = float(np.median(fit.model_ohm[unloaded][measured_open & ~model_open]))
-                words = (
-                    f"unloaded, the sensor reads open on {n_bad} rows where the model reads "
-                    f"{model_r / 1e3:.0f} kohm"
-                )
-            else:
-                meas_r = float(np.median(data.resistance_ohm[unloaded][~measured_open & model_open]))
-                words = (
-                    f"unloaded, the sensor reads {meas_r / 1e3:.0f} kohm on {n_bad} rows where the model "
-                    "is open"
-                )
-            findings.append((math.inf, Finding("zero_force", "unloaded", math.nan, n_bad, words)))
-    findings.sort(key=lambda item: -item[0])
-    return tuple(fd for _, fd in findings[:limit])
+_FORCE_RANGE_PAIRS = {
+    frozenset({"contact", "series_resistance"}),
+    frozenset({"contact", "leakage"}),
+    frozenset({"series_resistance", "leakage"}),
+}

@@ -4,46 +4,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from ..atomic import atomic_write_text
-from .discrepancy import DiscrepancyReport, Step, residual_axes
+from .calibration_plots import plot_fit
+from .discrepancy import DiscrepancyReport, Step
 from .fitting import FitData, FitResult
-from .plots import save_figure
 
 
-def _plot_residuals(data: FitData, fits: list[tuple[str, FitResult]], path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    axes_data = residual_axes(data)
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4), sharey=True)
-    for label, fit in fits:
-        res = fit.log_residual
-        ok = data.usable & np.isfinite(res)
-        axes[0].semilogx(axes_data["force"][ok], res[ok], ".", ms=2, alpha=0.4, label=label)
-        since = np.maximum(axes_data["time_since_change"][ok], 0.1)
-        axes[1].semilogx(since, res[ok], ".", ms=2, alpha=0.4, label=label)
-        d = axes_data["direction"][ok]
-        means = [float(np.mean(res[ok][d == v])) if np.any(d == v) else np.nan for v in (-1.0, 0.0, 1.0)]
-        axes[2].plot(["unloading", "hold/rest", "loading"], means, "o-", label=label)
-    axes[0].set(xlabel="force (N)", ylabel="ln(R_measured / R_model)", title="by force")
-    axes[1].set(xlabel="time since the last load change (s)", title="by time")
-    axes[2].set(xlabel="load direction", title="mean by direction")
-    for ax in axes:
-        ax.axhline(0.0, color="k", lw=0.5)
-    axes[0].legend(markerscale=4)
-    fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
-    return path
+def _plot_residuals(data: FitData, fits: list[tuple[str, FitResult]], path: Path, real_time: bool) -> Path:
+    label, fit = fits[-1]
+    return plot_fit(data, fit, {label: fit.force_inverted_n}, path, real_time)
 
 
 def _candidate_table(step: Step) -> list[str]:
     lines = [
-        "| candidate | added parameters | score | held-out log-R RMS | held-out force RMS (N) |",
+        "| candidate | added parameters | penalized score (lower is better) | held-out log-R RMS | "
+        "held-out force RMS (N) |",
         "|---|---|---|---|---|",
     ]
     for c in step.candidates:
@@ -55,7 +30,7 @@ def _candidate_table(step: Step) -> list[str]:
     return lines
 
 
-def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path) -> Path:
+def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path, real_time: bool = True) -> Path:
     """Write ``out_dir/report.md`` and its PNGs; returns the report's path."""
     out_dir.mkdir(parents=True, exist_ok=True)
     lines = [f"# Discrepancy report: {report.record} (channel {report.channel})", ""]
@@ -69,6 +44,8 @@ def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path) -> Pat
         f"- held-out gap: log-resistance RMS {before['log_resistance_rms']} -> "
         f"{after['log_resistance_rms']}, force RMS {before['force_rms_n']} N -> {after['force_rms_n']} N"
     )
+    lines.append(f"- {report.rival_summary()}")
+    lines.append(f"- noise floor (held-out log-R): {report.noise_floor_log:.4g}; {report.noise_description}")
     for note in report.notes:
         lines.append(f"- note: {note}")
     lines.append("")
@@ -96,7 +73,7 @@ def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path) -> Pat
             fits.append(
                 (f"with {step.added}", next(c.fit for c in step.candidates if c.effect == step.added))
             )
-        png = _plot_residuals(data, fits, out_dir / f"step{i}_residuals.png")
+        png = _plot_residuals(data, fits, out_dir / f"step{i}_residuals.png", real_time)
         lines.append(f"![residuals, step {i}]({png.name})")
         lines.append("")
     lines.append("## Fitted parameters of the final model (95 % intervals)")

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from ..model import EFFECT_PARAMETERS, ForceStatus, SensorModel, SensorParams, parse_effects
+from ..model.params import PARAMETER_RANGES
 from .records import ChannelRecord
 
 FloatArray = NDArray[np.float64]
@@ -97,9 +98,16 @@ class FitData:
     temperature_c: FloatArray | None
     usable: BoolArray
     held_out: BoolArray
+    #: per-row standard deviation of ln R (``measurement.NoiseModel``); None: uniform noise
+    sigma_log: FloatArray | None = None
 
     @classmethod
-    def from_channel(cls, channel: ChannelRecord, held_out_blocks: int = HELD_OUT_BLOCKS) -> FitData:
+    def from_channel(
+        cls,
+        channel: ChannelRecord,
+        held_out_blocks: int = HELD_OUT_BLOCKS,
+        sigma_log: FloatArray | None = None,
+    ) -> FitData:
         if channel.force_n is None:
             raise ValueError(
                 f"channel {channel.name!r} has no force_n column: a fit needs the reference force"
@@ -116,7 +124,18 @@ class FitData:
             temperature_c=channel.temperature_c,
             usable=channel.usable_for_fit(),
             held_out=np.asarray(block % 4 == 2),
+            sigma_log=sigma_log,
         )
+
+    def weights(self) -> FloatArray:
+        """Residual weights 1/sigma, scaled to a median of 1 over the usable rows (uniform: 1)."""
+        if self.sigma_log is None:
+            return np.ones(self.time_s.size)
+        s = self.sigma_log
+        ok = self.usable & np.isfinite(s) & (s > 0)
+        ref = float(np.median(s[ok])) if ok.any() else 1.0
+        with np.errstate(divide="ignore"):
+            return np.asarray(np.where(np.isfinite(s) & (s > 0), ref / s, 0.0))
 
     @property
     def train(self) -> BoolArray:
@@ -199,6 +218,7 @@ class _Problem:
         self.force = data.force_n[:, None]
         self.temp = None if data.temperature_c is None else data.temperature_c[:, None]
         self.train = data.train
+        self.weight = data.weights()[self.train]
 
     def params(self, x: FloatArray) -> SensorParams:
         values = {}
@@ -248,7 +268,7 @@ class _Problem:
             res = self.log_residual(self.params(x))[self.train]
         except ValueError:
             return np.full(int(np.count_nonzero(self.train)), 1e3)
-        return np.asarray(np.nan_to_num(res, nan=10.0))
+        return np.asarray(np.nan_to_num(res, nan=10.0) * self.weight)
 
 
 def fit_channel(
@@ -295,8 +315,7 @@ def fit_channel(
         if name in free:
             s = float(sigma[free.index(name)])
             if name in LINEAR_PARAMETERS:
-                half = Z95 * s * LINEAR_PARAMETERS[name]
-                low, high = value - half, value + half
+                low, high = _bounded_interval(name, value, s * LINEAR_PARAMETERS[name])
             else:
                 low, high = value * math.exp(-Z95 * s), value * math.exp(Z95 * s)
             estimates.append(ParameterEstimate(name, value, low, high, True))
@@ -319,6 +338,22 @@ def fit_channel(
         model_ohm=model_all,
         force_inverted_n=force_inv,
     )
+
+
+def _bounded_interval(name: str, value: float, sigma: float) -> tuple[float, float]:
+    """A 95 % interval inside the parameter's allowed range: a non-negative parameter's
+    interval is taken in log space (delta method on ln p, so it never crosses 0); a signed one
+    is the Wald interval clipped to its range."""
+    allowed = PARAMETER_RANGES.get(name)
+    if allowed is not None and allowed.low == 0.0 and value > 0.0:
+        rel = sigma / value
+        if not math.isfinite(rel) or Z95 * rel > 700.0:
+            return 0.0, math.inf
+        return value * math.exp(-Z95 * rel), value * math.exp(Z95 * rel)
+    low, high = value - Z95 * sigma, value + Z95 * sigma
+    if allowed is not None:
+        low, high = max(low, allowed.low), min(high, allowed.high)
+    return low, high
 
 
 # a log-parameter with sigma s has a 95 % interval of a factor exp(2 * 1.96 s); 1.15 is x10 wide

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import click
 
-from ..analysis.calibration import calibrate, format_report, write_calibration
-from ..analysis.records import read_record
+from ..analysis.calibration import MODELS, calibrate, format_report, write_calibration
+from ..analysis.records import DEFAULT_CHANNEL, read_record
 from ..errors import RecordError
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
 from .common import parse_assignments
@@ -20,6 +20,24 @@ from .common import parse_assignments
 @click.option("--effects", default="tunneling,contact,creep", show_default=True, help="model effects")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE", help="prior value of a parameter")
 @click.option("--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), help="calibration TOML")
+@click.option(
+    "--model",
+    type=click.Choice(MODELS),
+    default="physics",
+    show_default=True,
+    help="the channel's model to write: the physical model, the conductance line, a monotone lookup, "
+    "or auto (whichever reads held-out force best)",
+)
+@click.option(
+    "--as",
+    "as_name",
+    default=None,
+    metavar="NAME",
+    help="device channel name to write (needed for a record without a channel column: its channel is '0')",
+)
+@click.option(
+    "--plots", "plot_dir", type=click.Path(file_okay=False, path_type=Path), help="write PNGs to DIR"
+)
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object and nothing else")
 def calibrate_cmd(
     record_path: Path,
@@ -27,6 +45,9 @@ def calibrate_cmd(
     effects: str,
     params: tuple[str, ...],
     out_path: Path | None,
+    model: str,
+    as_name: str | None,
+    plot_dir: Path | None,
     as_json: bool,
 ) -> None:
     """Fit R0, the contact coefficient and E0, E1, mu1 (linear in force) to RECORD.csv."""
@@ -38,22 +59,58 @@ def calibrate_cmd(
         channels = [record.channel(n) for n in names]
     except (RecordError, UnknownEffectError, ParameterError) as exc:
         raise click.UsageError(str(exc)) from None
+    rename: dict[str, str] = {}
+    if as_name is not None:
+        if len(channels) != 1:
+            raise click.UsageError(
+                f"--as names one channel; this run calibrates {len(channels)} (use --channel)"
+            )
+        if not as_name.strip():
+            raise click.UsageError("--as needs a non-empty device channel name")
+        rename[channels[0].name] = as_name
+    elif out_path is not None and any(c.name == DEFAULT_CHANNEL for c in channels):
+        raise click.UsageError(
+            f"the record has no channel column, so its channel is named {DEFAULT_CHANNEL!r}, which a device "
+            f'config cannot use ([channel."{DEFAULT_CHANNEL}"]); give --as NAME, the device channel name '
+            "to write"
+        )
     results = []
     for ch in channels:
         try:
-            results.append(calibrate(ch, chosen, prior, record_name=str(record_path)))
+            results.append(
+                calibrate(ch, chosen, prior, record_name=str(record_path), metadata=record.metadata)
+            )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from None
     if out_path is not None:
-        write_calibration(out_path, results)
+        write_calibration(out_path, results, model, rename)
+    written: list[str] = []
+    if plot_dir is not None:
+        from ..analysis.calibration_plots import plot_calibration
+
+        for cal in results:
+            written += [str(p) for p in plot_calibration(cal, ch_record(record, cal.channel), plot_dir)]
     if as_json:
-        payload: dict[str, object] = {"calibrations": [c.as_dict() for c in results]}
+        payload: dict[str, object] = {"calibrations": [c.as_dict() for c in results], "model": model}
         if out_path is not None:
             payload["written"] = str(out_path)
+        if written:
+            payload["plots"] = written
         click.echo(json.dumps(payload))
         return
     for cal in results:
+        for w in cal.warnings:
+            click.echo(f"warning: {w}", err=True)
         click.echo(format_report(cal))
         click.echo("")
     if out_path is not None:
         click.echo(f"wrote {out_path}")
+    for p in written:
+        click.echo(f"wrote {p}")
+
+
+def ch_record(record: object, name: str) -> object:
+    from ..analysis.records import Record
+
+    assert isinstance(record, Record)
+    return record.channel(name)

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import click
 
-from ..analysis.discrepancy import decimate, run_discrepancy
-from ..analysis.fitting import FitData
+from ..analysis.discrepancy import decimate, prepare, run_discrepancy
+from ..analysis.measurement import time_is_real
 from ..analysis.records import read_record
 from ..errors import RecordError
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
@@ -46,13 +46,16 @@ def discrepancy_cmd(
     except (RecordError, UnknownEffectError, ParameterError) as exc:
         raise click.UsageError(str(exc)) from None
     try:
-        report = run_discrepancy(channel, base, cands, prior, record_name=str(record_path))
+        report = run_discrepancy(
+            channel, base, cands, prior, record_name=str(record_path), metadata=record.metadata
+        )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
     if out_dir is not None:
         from ..analysis.discrepancy_report import write_report
 
-        write_report(report, FitData.from_channel(decimate(channel)), out_dir)
+        data, _, _ = prepare(decimate(channel), record.metadata, prior)
+        write_report(report, data, out_dir, real_time=time_is_real(record.metadata))
     if as_json:
         click.echo(json.dumps(report.as_json()))
         return
@@ -64,5 +67,9 @@ def discrepancy_cmd(
     j = report.as_json()
     click.echo(f"added: {', '.join(j['added']) or 'nothing'}; final model: {', '.join(j['final'])}")
     click.echo(f"held-out gap before: {j['gap_before']}, after: {j['gap_after']}")
+    click.echo(f"noise floor (log-R): {report.noise_floor_log:.4g}; {report.noise_description}")
+    click.echo(report.rival_summary())
+    for note in report.notes:
+        click.echo(f"note: {note}")
     if out_dir is not None:
         click.echo(f"wrote {out_dir / 'report.md'}")

@@ -1,0 +1,46 @@
+"""Model choice on both gaps: near ties add the better candidate; worse force is never added."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from test_discrepancy import NOISE, world_channel  # same directory (rootdir-relative import mode)
+
+from gateway.analysis.discrepancy import CandidateScore, _decide, _penalized
+from gateway.analysis.fitting import FitData, fit_channel
+
+
+def test_a_near_tie_adds_the_better_candidate_names_the_runner_up_and_reaches_the_noise() -> None:
+    data = FitData.from_channel(world_channel((), 2))
+    base = fit_channel(data, ("tunneling", "creep"))
+    contact = fit_channel(data, ("tunneling", "contact", "creep"))
+    series = fit_channel(data, ("tunneling", "creep", "series_resistance"))
+    now = _penalized(base, data)
+    best_score = _penalized(contact, data)
+    # the runner-up gains 95 % of the best's score gain: the two cannot be told apart by score
+    tie_score = now - 0.95 * (now - best_score)
+    scored = [
+        CandidateScore("contact", 1, contact.gap_test, best_score, contact),
+        CandidateScore("series_resistance", 1, series.gap_test, tie_score, series),
+    ]
+    # the runner-up's held-out RMS as close as the score says (a near tie on log-R too)
+    near = replace(contact.gap_test, log_resistance_rms=contact.gap_test.log_resistance_rms * 1.02)
+    scored[1] = replace(scored[1], gap_test=near)
+    added, evidence, runner_up = _decide(base, data, scored, ())
+    assert added == "contact" and runner_up == "series_resistance", evidence
+    assert "series_resistance fits nearly as well" in evidence
+    # the record spans 0.2-8 N already, so the separating measurement is not asked for
+    assert "to separate them" not in evidence
+    assert contact.gap_test.log_resistance_rms <= 1.5 * NOISE
+    assert base.gap_test.log_resistance_rms > 1.3 * contact.gap_test.log_resistance_rms
+
+
+def test_a_candidate_that_makes_the_force_worse_is_not_added() -> None:
+    data = FitData.from_channel(world_channel((), 2))
+    base = fit_channel(data, ("tunneling", "creep"))
+    contact = fit_channel(data, ("tunneling", "contact", "creep"))
+    worse = replace(contact.gap_test, force_rms_n=base.gap_test.force_rms_n * 1.5)
+    scored = [CandidateScore("contact", 1, worse, _penalized(contact, data), contact)]
+    added, evidence, _ = _decide(base, data, scored, ())
+    assert added is None
+    assert "make the held-out force worse: contact" in evidence
