@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import stat
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -286,7 +287,7 @@ def edit_channel(
     target = find_channel(config, name, device_name)
     document = tomlkit.parse(text)
     _edit_document(document, target, assignments)
-    new_text = tomlkit.dumps(document)
+    new_text = _before_trailing_comments(tomlkit.dumps(document), target.channel.index)
     edited = _parse_edit(config_path, new_text)
     channel = edited.buses[target.bus_index].devices[target.device_index].channels[target.channel.index]
     wrong = [a.key for a in assignments if not _took_effect(channel, a)]
@@ -311,7 +312,46 @@ def _parse_edit(config_path: Path, new_text: str) -> GatewayConfig:
         ) from None
 
 
+def _before_trailing_comments(text: str, index: int) -> str:
+    """A new ``[[bus.device.channel]]`` table goes where tomlkit puts it: after every comment
+    that follows the device's last table, which in a file like the example is a commented-out
+    template of another bus; uncommenting the template would then move the channel to that
+    bus. So the new table is moved above a comment block that a blank line separates from
+    what precedes it."""
+    lines = text.split("\n")
+    header = "[[bus.device.channel]]"
+    starts = [i for i, line in enumerate(lines) if line.strip() == header]
+    start = next(
+        (i for i in reversed(starts) if i + 1 < len(lines) and lines[i + 1].strip() == f"index = {index}"),
+        None,
+    )
+    if start is None:
+        return text
+    end = start + 1
+    while end < len(lines) and lines[end].strip():
+        end += 1
+    k = start
+    while k > 0 and (not lines[k - 1].strip() or lines[k - 1].lstrip().startswith("#")):
+        k -= 1
+    run = lines[k:start]
+    first_comment = next((j for j, line in enumerate(run) if line.lstrip().startswith("#")), None)
+    if first_comment is None or first_comment == 0:
+        return text  # no comments, or comments that hang on to the table above
+    block = [*lines[start:end], ""]
+    moved = [*lines[:k], *run[:first_comment], *block, *run[first_comment:], *lines[end + 1 :]]
+    return "\n".join(moved)
+
+
 def _write(config_path: Path, new_text: str) -> None:
+    try:
+        mode = config_path.stat().st_mode
+    except OSError:
+        mode = stat.S_IWUSR
+    if not mode & stat.S_IWUSR:
+        raise ConfigError(
+            f"{config_path} is read-only (mode {stat.S_IMODE(mode):04o}); refusing to replace it: "
+            f"make it writable (chmod u+w) to edit it; the file is unchanged"
+        )
     try:
         atomic_write_text(config_path, new_text)
     except OSError as exc:

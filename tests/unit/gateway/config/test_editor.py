@@ -127,3 +127,44 @@ def test_any_position_in_range_is_written_and_read_back(
     path.write_text(CONFIG, encoding="utf-8")
     edit_channel(path, "tip", None, [parse_assignment(f"x_mm={x!r}")])
     assert load_config(path).buses[0].devices[0].channel("tip").x_mm == x
+
+
+TEMPLATE = """
+# A second bus: uncomment to use it.
+# [[bus]]
+# name = "line"
+# kind = "tcp"
+# host = "127.0.0.2"
+#
+# [[bus.device]]
+# name = "other"
+# device_id = 2
+# profile = "tactile-sim"
+# channels = 4
+"""
+
+
+def test_a_new_channel_entry_goes_above_a_commented_template(config_file: Path) -> None:
+    """Appended after the template, the entry would move to the template's device once a
+    user uncomments it, as the example file invites."""
+    config_file.write_text(CONFIG + TEMPLATE, encoding="utf-8")
+    edit_channel(config_file, "ch03", None, [parse_assignment("name=thumb")])
+    text = config_file.read_text(encoding="utf-8")
+    assert text.index('name = "thumb"') < text.index("# A second bus")
+    assert text.endswith(TEMPLATE.rstrip("\n") + "\n\n") or text.endswith(TEMPLATE)
+    uncommented = re.sub(r"(?m)^# ?(?=\[|\w+ =)", "", text)
+    config_file.write_text(uncommented, encoding="utf-8")
+    config = load_config(config_file)
+    first, second = (bus.devices[0] for bus in config.buses)
+    assert first.channels[3].name == "thumb" and [c.name for c in second.channels] == [
+        f"ch{i:02d}" for i in range(4)
+    ]
+
+
+def test_a_read_only_configuration_is_not_replaced(config_file: Path) -> None:
+    config_file.chmod(0o444)
+    before = config_file.read_bytes()
+    with pytest.raises(ConfigError, match=r"is read-only \(mode 0444\); refusing to replace it"):
+        edit_channel(config_file, "tip", None, [parse_assignment("x_mm=3")])
+    assert config_file.read_bytes() == before
+    assert oct(config_file.stat().st_mode & 0o777) == "0o444"
