@@ -11,6 +11,7 @@ are flushed, so an interrupted recording is a valid record of everything read so
 from __future__ import annotations
 
 import math
+import os
 import threading
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
@@ -116,9 +117,14 @@ class LiveRecorder:
             self.stats.rows += rows
 
 
-def record_path_ok(path: Path) -> None:
-    """Refuse to overwrite a directory or write into a missing one (clear messages)."""
+def record_path_ok(path: Path, force: bool = False) -> None:
+    """Refuse to overwrite a directory, an existing file (unless ``force``) or to write into a
+    missing or read-only folder (clear messages)."""
     if path.is_dir():
         raise ValueError(f"{path} is a directory")
     if not path.parent.exists():
         raise ValueError(f"directory {path.parent} does not exist")
+    if path.exists() and not force:
+        raise ValueError(f"{path} exists; refusing to overwrite it (use --force to replace it)")
+    if not os.access(path.parent, os.W_OK):
+        raise ValueError(f"directory {path.parent} is not writable")

@@ -98,7 +98,7 @@ def read_record(path: str | os.PathLike[str], require_force: bool = False) -> Re
     """Read and validate a record file (see the module docstring)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a spreadsheet's byte order mark is not a column
     except FileNotFoundError:
         raise RecordError(f"{p}: no such file") from None
     except UnicodeDecodeError as exc:
@@ -111,6 +111,14 @@ def read_record(path: str | os.PathLike[str], require_force: bool = False) -> Re
 def parse_record(text: str, path: Path | None = None, require_force: bool = False) -> Record:
     """Parse record text; ``path`` is only used in messages."""
     where = str(path) if path else "<record>"
+    text = text.removeprefix("\ufeff")
+    try:
+        return _parse_record(text, path, where, require_force)
+    except csv.Error as exc:  # e.g. a field over the csv module's size limit
+        raise RecordError(f"{where}: not a readable CSV record: {exc}") from None
+
+
+def _parse_record(text: str, path: Path | None, where: str, require_force: bool) -> Record:
     lines = text.splitlines()
     metadata: dict[str, str] = {}
     header_index = None

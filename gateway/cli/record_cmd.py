@@ -83,11 +83,16 @@ async def record_live(
 @click.option("--duration", "duration_s", required=True, type=click.FloatRange(min=0.0), help="seconds")
 @click.option("--out", "out_path", required=True, type=click.Path(path_type=Path), help="record CSV to write")
 @click.option("--channels", default=None, help="comma-separated channel names (default: all)")
-def record(config_path: Path, duration_s: float, out_path: Path, channels: str | None) -> None:
-    """Write a measurement record from live polls (reference force and temperature where available)."""
+@click.option("--force", "overwrite", is_flag=True, help="replace an existing record file")
+def record(
+    config_path: Path, duration_s: float, out_path: Path, channels: str | None, overwrite: bool
+) -> None:
+    """Write a measurement record from live polls (reference force and temperature where available).
+
+    Exit status 1 when no sample was recorded (every device down), 2 for bad arguments."""
     try:
         config = load_config(config_path)
-        record_path_ok(out_path)
+        record_path_ok(out_path, force=overwrite)
     except (ConfigError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None
     names = [c.strip() for c in channels.split(",") if c.strip()] if channels else None
@@ -102,6 +107,13 @@ def record(config_path: Path, duration_s: float, out_path: Path, channels: str |
     click.echo(
         f"wrote {stats.rows} samples from {stats.polls} polls to {out_path} ({stats.read_errors} read errors)"
     )
+    if stats.rows == 0:
+        click.echo(
+            f"record: no sample recorded in {duration_s:g} s: no device answered ({stats.read_errors} read "
+            "errors); check the devices and the configuration",
+            err=True,
+        )
+        raise SystemExit(1)
 
 
 async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, object]:

@@ -169,3 +169,18 @@ def test_every_written_value_reads_back_as_the_same_double(
     assert record.resistance_ohm.tolist() == [row[1] for row in rows]
     assert record.force_n is not None and record.force_n.tolist() == [row[2] for row in rows]
     assert record.temperature_c is not None and record.temperature_c.tolist() == [row[3] for row in rows]
+
+
+def test_a_spreadsheet_byte_order_mark_is_not_part_of_the_first_column(tmp_path: Path) -> None:
+    path = tmp_path / "excel.csv"
+    path.write_text("time_s,resistance_ohm,force_n\n0,1000,1\n0.1,1100,1.5\n", encoding="utf-8-sig")
+    assert path.read_bytes()[:3] == b"\xef\xbb\xbf"
+    channel = read_record(path, require_force=True).channel()
+    assert channel.n_samples == 2 and channel.resistance_ohm.tolist() == [1000.0, 1100.0]
+
+
+def test_a_field_over_the_csv_limit_is_a_record_error(tmp_path: Path) -> None:
+    path = tmp_path / "huge-field.csv"
+    path.write_text("time_s,resistance_ohm\n0," + "1" * 200_000 + "\n")
+    with pytest.raises(RecordError, match=r"not a readable CSV record: field larger than field limit"):
+        read_record(path)

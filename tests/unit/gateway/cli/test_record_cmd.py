@@ -1,0 +1,42 @@
+"""``tactile-gateway record``: what it refuses, and an honest exit status."""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from gateway.cli import main
+
+
+def _config(tmp_path: Path) -> Path:
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    path = tmp_path / "gw.toml"
+    path.write_text(
+        f'[[bus]]\nname = "b"\nkind = "tcp"\nhost = "127.0.0.1"\nport = {port}\ntimeout_s = 0.2\n'
+        "backoff_initial_s = 0.05\nbackoff_max_s = 0.1\n\n"
+        '[[bus.device]]\nname = "d"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 2\n'
+    )
+    return path
+
+
+def test_an_existing_record_is_not_overwritten_without_force(tmp_path: Path) -> None:
+    out = tmp_path / "run.csv"
+    out.write_text("precious\n")
+    result = CliRunner().invoke(
+        main, ["record", "-c", str(_config(tmp_path)), "--duration", "0", "--out", str(out)]
+    )
+    assert result.exit_code == 2 and "exists; refusing to overwrite it (use --force" in result.output
+    assert out.read_text() == "precious\n"
+
+
+def test_a_record_with_every_device_down_exits_1(tmp_path: Path) -> None:
+    out = tmp_path / "run.csv"
+    result = CliRunner().invoke(
+        main, ["record", "-c", str(_config(tmp_path)), "--duration", "0.5", "--out", str(out), "--force"]
+    )
+    assert result.exit_code == 1, result.output
+    assert "no sample recorded in 0.5 s: no device answered" in result.output
