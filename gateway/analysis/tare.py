@@ -89,7 +89,10 @@ def compute_tare(
     """The baselines of ``device`` from ``samples`` of it at rest; ``TareError`` if they are
     not those of a still, unloaded array (see the module docstring)."""
     if len(samples) < MIN_POLLS:
-        raise TareError(f"only {len(samples)} polls; a tare needs at least {MIN_POLLS} (sample longer)")
+        raise TareError(
+            f"only {len(samples)} polls; a tare needs at least {MIN_POLLS} (sample longer); "
+            "nothing was written"
+        )
     adc = device.encoding == "adc"
     if adc:
         data = np.array([np.asarray(s.counts, dtype=np.float64) for s in samples if s.counts is not None])
@@ -98,7 +101,7 @@ def compute_tare(
             [np.asarray(s.resistance_ohm, dtype=np.float64) for s in samples if s.resistance_ohm is not None]
         )
     if data.shape[0] < MIN_POLLS:
-        raise TareError("the samples carry no values of this device's encoding")
+        raise TareError("the samples carry no values of this device's encoding; nothing was written")
     n_polls = data.shape[0]
     third = max(1, n_polls // 3)
     with np.errstate(invalid="ignore"):

@@ -104,7 +104,7 @@ def _parse_registers(table: Table, n: int, encoding: str, profile: str | None) -
     status_span = 2 * STATUS_BITMAP_STRIDE + status_registers(n)
     value_key = "adc_address" if encoding == "adc" else "float_address"
     if not table.has(value_key):
-        hint = f" (set by {profile})" if profile else ""
+        hint = f" ({profile} does not give it)" if profile else ""
         raise table.error(
             value_key,
             f"required key is missing{hint}: where the device keeps its {encoding} values; name a "
@@ -232,12 +232,12 @@ def _parse_baselines(table: Table, n: int, front_end: FrontEnd | None) -> tuple[
         )
     out: list[float | None] = []
     for i, value in enumerate(values):
-        where = f"{key}[{i}]"
+        where = f"{table.at(key)}[{i}]"
         if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
-            raise table.error(where, f"expected a number, got {type_name(value)} {show_value(value)}")
+            raise table.ctx.error(where, f"expected a number, got {type_name(value)} {show_value(value)}")
         if key == "baseline_ohm":
             if not value > 0.0:
-                raise table.error(
+                raise table.ctx.error(
                     where, f"{value!r} is out of range; allowed: (0, inf] ohm (inf: open at rest)"
                 )
             out.append(float(value))
@@ -247,7 +247,7 @@ def _parse_baselines(table: Table, n: int, front_end: FrontEnd | None) -> tuple[
         r, status = front_end.resistance(np.array([value], dtype=np.float64))
         resistance = float(r[0])
         if int(status[0]) == int(DividerStatus.INVALID) or not resistance > 0.0:
-            raise table.error(
+            raise table.ctx.error(
                 where,
                 f"{value!r} counts is not an unloaded reading of this front end ({front_end.describe()}): "
                 f"it reads {resistance:g} ohm",
@@ -269,11 +269,13 @@ def _check_overlaps(ctx: Context, path: str, device: DeviceConfig) -> None:
     for i, later in enumerate(blocks):
         for earlier in blocks[:i]:
             if later.kind == earlier.kind and later.address <= earlier.end and earlier.address <= later.end:
-                table = "clock" if later.purpose == "device_time" else "registers"
+                # the clock is the block a user adds over a map, so it carries the blame
+                blamed, other = (earlier, later) if earlier.purpose == "device_time" else (later, earlier)
+                table = "clock" if blamed.purpose == "device_time" else "registers"
                 raise ctx.error(
-                    f"{path}.{table}.{keys[later.purpose]}",
-                    f"the {later.name} block {later.address}..{later.end} overlaps the {earlier.name} block "
-                    f"{earlier.address}..{earlier.end}; register blocks must not overlap",
+                    f"{path}.{table}.{keys[blamed.purpose]}",
+                    f"the {blamed.name} block {blamed.address}..{blamed.end} overlaps the {other.name} block "
+                    f"{other.address}..{other.end}; register blocks must not overlap",
                 )
 
 
