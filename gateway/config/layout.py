@@ -74,6 +74,8 @@ class GridLayout:
 
     def cell(self, index: int) -> tuple[int, int]:
         """The drawn (row, column) of channel ``index``; row 0 is the top row."""
+        if not 0 <= index < self.n_channels:
+            raise IndexError(f"channel index {index} is outside 0..{self.n_channels - 1}")
         if self.order == "row-major":
             row, col = divmod(index, self.columns)
         else:

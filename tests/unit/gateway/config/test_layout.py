@@ -218,3 +218,10 @@ def test_the_limits_themselves_are_allowed() -> None:
     assert layout.cell(0) == (0, 0) and layout.position_mm(0) == (0.0, 0.0)
     assert GridLayout(6, 6, 1e-9, 1e-9).rows == 1  # columns = channels, a tiny pitch
     assert GridLayout(6, 1, 5.0, 5.0).rows == 6  # a single column
+
+
+def test_an_index_outside_the_grid_is_refused() -> None:
+    layout = GridLayout(6, 3, 1.0, 1.0)
+    for index in (-1, 6):
+        with pytest.raises(IndexError, match=rf"channel index {index} is outside 0\.\.5"):
+            layout.cell(index)
