@@ -17,7 +17,7 @@ import random
 import threading
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..config import BusConfig, GatewayConfig
 from ..modbus.client import ModbusTransport
@@ -165,6 +165,14 @@ class Poller:
             elif runner.state.last is None:
                 snap, _ = runner.processor.stale(runner.state, self._wall(), "not polled yet")
                 self._devices[runner.config.name] = snap
+            else:
+                # the last values stand until the next poll, but what the configuration says
+                # (interval, bus) is the new configuration's from the moment it is in force
+                self._devices[runner.config.name] = replace(
+                    self._devices[runner.config.name],
+                    poll_interval_s=runner.processor.poll_interval_s,
+                    bus=runner.processor.bus,
+                )
             self._counters[runner.config.name] = runner.counters
         self._publish_all()
 

@@ -6,6 +6,7 @@ clock and a seeded random generator, and checks what the loop published and coun
 
 from __future__ import annotations
 
+import dataclasses
 import random
 
 import numpy as np
@@ -201,3 +202,17 @@ async def test_a_reload_keeps_the_counters() -> None:
     assert after.reads_total == before.reads_total == 4
     assert dict(after.read_errors_total) == dict(before.read_errors_total)
     await poller.stop()
+
+
+async def test_after_a_reload_the_published_snapshot_has_the_new_interval_at_once() -> None:
+    """The race behind a flaky end-to-end test: after SIGHUP and "reloaded", a scrape read the
+    old poll interval until the first poll under the new configuration was published."""
+    poller, worker, _, _, _ = setup(device_image())
+    await worker.poll_cycle()
+    assert latest(poller).poll_interval_s == 0.1 and latest(poller).up
+    old_bus = poller.config.buses[0]
+    new_bus = dataclasses.replace(old_bus, poll_interval_s=0.25)
+    await poller.reload(gateway_config_for([new_bus]))
+    snap = latest(poller)
+    assert snap.poll_interval_s == 0.25
+    assert snap.up and snap.force_n.tolist() == pytest.approx(SPEC_FORCES_N, rel=5e-3)  # values stand
