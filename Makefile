@@ -5,7 +5,7 @@ STAMP   := $(VENV)/.installed
 SYSDEPS := socat prometheus mosquitto
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: test lint bench demo venv sysdeps clean
+.PHONY: test lint bench demo venv sysdeps clean stress-test
 
 $(STAMP): pyproject.toml
 	python3 -m venv $(VENV)
@@ -39,6 +39,10 @@ test: $(STAMP) sysdeps lint
 
 bench: $(STAMP)
 	$(PY) -m bench
+
+# The integration tests, 5 rounds, with a CPU hog on every core (not part of `make test`).
+stress-test: $(STAMP) sysdeps
+	$(PY) -m bench.stress --rounds 5
 
 demo: $(STAMP)
 	$(VENV)/bin/tactile-gateway demo
