@@ -2,10 +2,10 @@
 VENV    ?= .venv
 PY      := $(VENV)/bin/python
 STAMP   := $(VENV)/.installed
-SYSDEPS := socat prometheus mosquitto
+SYSDEPS := socat prometheus mosquitto chromium
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: test lint bench demo venv sysdeps clean stress-test
+.PHONY: test lint bench demo venv sysdeps clean stress-test soak
 
 $(STAMP): pyproject.toml
 	python3 -m venv $(VENV)
@@ -16,13 +16,15 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 # Debian packages the integration tests use: socat (serial ptys), prometheus/promtool,
-# systemd-analyze (unit file verification), mosquitto (a real MQTT broker).
+# systemd-analyze (unit file verification), mosquitto (a real MQTT broker), chromium (the
+# browser the page's tests drive headless through Playwright; nothing is downloaded at test time).
 sysdeps:
 	@missing=""; \
 	command -v socat >/dev/null || missing="$$missing socat"; \
 	command -v promtool >/dev/null || missing="$$missing prometheus"; \
 	command -v systemd-analyze >/dev/null || missing="$$missing systemd"; \
 	command -v mosquitto >/dev/null || [ -x /usr/sbin/mosquitto ] || missing="$$missing mosquitto"; \
+	command -v chromium >/dev/null || missing="$$missing chromium"; \
 	if [ -n "$$missing" ]; then \
 		echo "installing Debian packages:$$missing"; \
 		SUDO=""; [ "$$(id -u)" = 0 ] || SUDO=sudo; \
@@ -39,6 +41,11 @@ test: $(STAMP) sysdeps lint
 
 bench: $(STAMP)
 	$(PY) -m bench
+
+# The gateway against the simulator with faults on a schedule (not part of `make test`).
+SOAK_MINUTES ?= 20
+soak: $(STAMP)
+	$(PY) -m bench.soak --minutes $(SOAK_MINUTES)
 
 # The integration tests, 5 rounds, with a CPU hog on every core (not part of `make test`).
 stress-test: $(STAMP) sysdeps

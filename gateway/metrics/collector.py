@@ -58,6 +58,12 @@ class SnapshotCollector:
             f"held forces as the sensor creeps), {from_poll}",
             labels=["device", "channel"],
         )
+        reference = GaugeMetricFamily(
+            "tactile_reference_force_newtons",
+            f"Reference force of the channel in newtons (N) where the device reports one (a bench's load "
+            f"cell, the simulator's truth), {from_poll}",
+            labels=["device", "channel"],
+        )
         resistance = GaugeMetricFamily(
             "tactile_resistance_ohms",
             f"Sensor resistance in ohms, {from_poll}; absent when open or invalid",
@@ -150,6 +156,8 @@ class SnapshotCollector:
                     force.add_metric(labels, float(ch.force_n))  # type: ignore[arg-type]
                 if _finite(ch.force_static_n):
                     static.add_metric(labels, float(ch.force_static_n))  # type: ignore[arg-type]
+                if _finite(ch.reference_force_n):
+                    reference.add_metric(labels, float(ch.reference_force_n))  # type: ignore[arg-type]
                 if _finite(ch.resistance_ohm):
                     resistance.add_metric(labels, float(ch.resistance_ohm))  # type: ignore[arg-type]
                 for s in ChannelStatus:
@@ -182,6 +190,7 @@ class SnapshotCollector:
         return [
             force,
             static,
+            reference,
             resistance,
             status,
             position,
