@@ -11,6 +11,7 @@ from .model_cmd import model
 from .record_cmd import paper, record
 from .run_cmd import demo, poll_once, run
 from .scan_cmd import scan
+from .subscribe_cmd import subscribe
 from .tare_cmd import tare
 
 
@@ -32,5 +33,6 @@ main.add_command(record)
 main.add_command(paper)
 main.add_command(tare)
 main.add_command(scan)
+main.add_command(subscribe)
 
 __all__ = ["main"]

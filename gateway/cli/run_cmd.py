@@ -19,6 +19,7 @@ import math
 import signal
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -41,6 +42,7 @@ from ..model import Divider
 from ..mqtt.link import MqttLink
 from ..runtime.poller import Poller, SnapshotHolder
 from ..runtime.snapshot import ChannelStatus, DeviceSnapshot, GatewaySnapshot
+from ..web import FrameHub, WebPage
 from .common import config_option
 from .simulated import gateway_params
 
@@ -76,12 +78,22 @@ _log_level = click.option(
 
 
 # --------------------------------------------------------------------------- run
-async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None) -> int:
+def _page(holder: SnapshotHolder, config: GatewayConfig, enabled: bool = True) -> WebPage | None:
+    """The live page over ``holder``, unless it is turned off (``--no-page``, or a ``page =
+    false`` of the metrics section where the configuration has that key)."""
+    if not enabled or not getattr(config.metrics, "page", True):
+        return None
+    return WebPage(FrameHub(holder))
+
+
+async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None, page_on: bool = True) -> int:
     """Poll and serve until SIGTERM/SIGINT; SIGHUP reloads ``config_path``."""
     holder = SnapshotHolder()
     registry = make_registry(holder.get, CollectorRegistry(auto_describe=False))
+    page = _page(holder, config, page_on)
+    install = page.install if page is not None else None
     try:
-        server = MetricsServer(registry, config.metrics.host, config.metrics.port, web).start()
+        server = MetricsServer(registry, config.metrics.host, config.metrics.port, web, install).start()
     except OSError as exc:
         log.error("cannot serve metrics on %s:%s: %s", config.metrics.host, config.metrics.port, exc)
         return EXIT_CONFIG
@@ -95,7 +107,9 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None)
     for sig in handled:
         loop.add_signal_handler(sig, commands.put_nowait, "reload" if sig == signal.SIGHUP else "stop")
     await poller.start()
-    log.info("polling %d bus(es); metrics on %s", len(config.buses), server.url)
+    log.info(
+        "polling %d bus(es); metrics on %s; page %s", len(config.buses), server.url, server.page_url or "off"
+    )
     try:
         while (command := await commands.get()) != "stop":
             try:
@@ -113,7 +127,7 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None)
                 report.channels_reset,
             )
             if new_config.metrics != config.metrics or new_web != web:
-                server = _restart_server(server, registry, new_config.metrics, new_web)
+                server = _restart_server(server, registry, new_config.metrics, new_web, install)
             config, web = new_config, new_web
     finally:
         for sig in handled:
@@ -126,22 +140,27 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None)
 
 
 def _restart_server(
-    old: MetricsServer, registry: CollectorRegistry, metrics: MetricsConfig, web: WebConfig | None
+    old: MetricsServer,
+    registry: CollectorRegistry,
+    metrics: MetricsConfig,
+    web: WebConfig | None,
+    install: Callable[[Any], None] | None = None,
 ) -> MetricsServer:
     old.stop()
     try:
-        return MetricsServer(registry, metrics.host, metrics.port, web).start()
+        return MetricsServer(registry, metrics.host, metrics.port, web, install).start()
     except OSError as exc:
         log.error(
             "cannot serve metrics on %s:%s (%s); keeping the old endpoint", metrics.host, metrics.port, exc
         )
-        return MetricsServer(registry, old.host, old.port, old.web_config).start()
+        return MetricsServer(registry, old.host, old.port, old.web_config, install).start()
 
 
 @click.command("run")
 @config_option
+@click.option("--no-page", is_flag=True, help="serve /metrics only, without the live page and its API")
 @_log_level
-def run(config_path: Path, log_level: str) -> None:
+def run(config_path: Path, no_page: bool, log_level: str) -> None:
     """Poll the configured buses and serve Prometheus metrics until stopped.
 
     SIGHUP reloads the configuration file; SIGTERM or SIGINT stop cleanly.
@@ -152,7 +171,7 @@ def run(config_path: Path, log_level: str) -> None:
     except (ConfigError, OSError) as exc:
         click.echo(f"tactile-gateway: {exc}", err=True)
         sys.exit(EXIT_CONFIG)
-    sys.exit(asyncio.run(serve(config_path, config, web)))
+    sys.exit(asyncio.run(serve(config_path, config, web, not no_page)))
 
 
 # --------------------------------------------------------------------------- poll-once
@@ -250,11 +269,14 @@ def poll_once(config_path: Path, as_json: bool, log_level: str) -> None:
 _SHADES = (236, 238, 240, 94, 130, 166, 202, 208, 214, 220, 226)
 
 
-def render_view(dev: DeviceSnapshot, columns: int, url: str, color: bool = True) -> str:
+def render_view(
+    dev: DeviceSnapshot, columns: int, url: str, color: bool = True, page_url: str | None = None
+) -> str:
     """A plain-text frame: the forces as a grid (N), total force, centre of pressure."""
     rows = -(-dev.n_channels // columns)
     fmax = max(1.0, max((float(f) for f in dev.force_n if math.isfinite(f)), default=0.0))
-    out = [f"tactile-gateway demo - metrics on {url} - Ctrl-C to stop", ""]
+    page = f"page on {page_url} - " if page_url else ""
+    out = [f"tactile-gateway demo - {page}metrics on {url} - Ctrl-C to stop", ""]
     views = dev.channels()
     for r in range(rows):
         cells = []
@@ -307,7 +329,9 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
             holder = SnapshotHolder()
             registry = make_registry(holder.get, CollectorRegistry(auto_describe=False))
             try:
-                server = MetricsServer(registry, host, port).start()
+                server = MetricsServer(
+                    registry, host, port, install=WebPage(FrameHub(holder)).install
+                ).start()
             except OSError as exc:
                 click.echo(f"tactile-gateway: cannot serve metrics on {host}:{port}: {exc}", err=True)
                 return EXIT_CONFIG
@@ -319,7 +343,7 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
                     while not stop.is_set() and (t_end is None or time.monotonic() < t_end):
                         snap = holder.get().devices.get("demo")
                         if snap is not None:
-                            frame = render_view(snap, 4, server.url, color=tty)
+                            frame = render_view(snap, 4, server.url, color=tty, page_url=server.page_url)
                             out.write(("\x1b[H" + frame + "\x1b[J") if tty else frame + "\n\n")
                             out.flush()
                         with contextlib.suppress(TimeoutError):

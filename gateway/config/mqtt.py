@@ -165,6 +165,12 @@ def parse_mqtt(ctx: Context, root: Table) -> MqttConfig | None:
             raise table.error("password_file", "needs username as well")
         _private(ctx, table.at("password_file"), password_file)
     gateway = table.string("gateway", None, "this gateway's topic level") or default_gateway_name()
+    prefix = table.string("topic_prefix", "tactile", "topic levels such as 'plant/a/tactile'") or "tactile"
+    for key, value, slash in (("gateway", gateway, False), ("topic_prefix", prefix, True)):
+        try:
+            check_topic_level(key, value, allow_slash=slash)
+        except ConfigError as exc:
+            raise table.error(key, str(exc).split(": ", 1)[1]) from None
     client_id = table.string("client_id", None, "an MQTT client id") or f"tactile-gateway-{gateway}"[:64]
     if not _CLIENT_ID_RE.fullmatch(client_id):
         raise table.error("client_id", f"{client_id!r} is not allowed; allowed: [A-Za-z0-9_.-]{{1,64}}")
@@ -178,8 +184,4 @@ def parse_mqtt(ctx: Context, root: Table) -> MqttConfig | None:
         "protocol": table.choice("protocol", "5", MQTT_PROTOCOLS),
         "queue_frames": table.integer("queue_frames", 1000, 1, 1_000_000),
     }
-    try:
-        return MqttConfig(host, port, tls, username, password_file, client_id, prefix, gateway, **data)
-    except ConfigError as exc:
-        key = "gateway" if "gateway" in str(exc).split(":")[1] else "topic_prefix"
-        raise table.error(key, str(exc).split(": ", 2)[-1]) from None
+    return MqttConfig(host, port, tls, username, password_file, client_id, prefix, gateway, **data)

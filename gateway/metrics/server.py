@@ -1,49 +1,45 @@
-"""The /metrics HTTP server: a registry served from a thread, with optional TLS and basic auth.
+"""The HTTP server of the gateway: ``/metrics`` (and the page, when one is installed), served
+by aiohttp from a thread of its own, with optional TLS and basic auth.
 
-``MetricsServer`` serves ``http(s)://host:port/metrics`` with ``http.server`` threads; a
-``WebConfig`` (``web_config.load_web_config``) adds TLS (the handshake runs in the handler
-thread, so a slow client cannot block accept) and HTTP basic auth.
+``MetricsServer`` binds ``host:port`` when it is built (so a taken port is an ``OSError``
+right away and ``port`` is known for port 0), then runs an aiohttp application on its own
+event loop in the thread ``tactile-metrics``: the poller's loop never waits for a client. A
+``WebConfig`` (``web_config.load_web_config``) adds TLS (handshakes run in that loop, so a
+slow client cannot block others) and HTTP basic auth, which guards every path. The headers
+of the web config go on every response. ``/metrics`` is built in a worker thread of that
+loop and sent as ``prometheus_client.generate_latest`` gives it, byte for byte.
+
+An ``install`` callable (``gateway.web.WebPage.install``) adds routes to the application,
+e.g. the live pressure-map page; without one ``/`` is a link to ``/metrics``.
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import socket
-import ssl
-import sys
 import threading
-from collections.abc import Mapping
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any
+from collections.abc import Awaitable, Callable
 
+from aiohttp import web
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 
 from .web_config import BasicAuth, WebConfig
 
 log = logging.getLogger(__name__)
 
+Install = Callable[[web.Application], None]
+Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
 
-class _Server(ThreadingHTTPServer):
-    # handler threads are joined by server_close (each is bounded by the handler timeout)
-    daemon_threads = False
-    block_on_close = True
-    allow_reuse_address = True
-    ssl_context: ssl.SSLContext | None = None
+_TEXT = "text/plain; charset=utf-8"
+_INDEX = b'<html><body><h1>tactile-gateway</h1><a href="/metrics">metrics</a></body></html>\n'
+#: how long a stop waits for open responses (long-lived streams are ended first)
+SHUTDOWN_TIMEOUT_S = 2.0
 
-    def handle_error(self, request: Any, client_address: Any) -> None:
-        exc = sys.exc_info()[1]
-        if isinstance(exc, ssl.SSLError | ConnectionError | TimeoutError):
-            # failed handshakes, plain HTTP on a TLS port, clients that hang up
-            log.debug("http %s: %s", client_address[0], exc)
-        else:
-            log.error("http %s: error while serving", client_address[0], exc_info=exc)
 
-    def get_request(self) -> tuple[socket.socket, Any]:
-        sock, addr = super().get_request()
-        if self.ssl_context is not None:
-            # the handshake runs in the handler thread, so a slow client cannot block accept
-            sock = self.ssl_context.wrap_socket(sock, server_side=True, do_handshake_on_connect=False)
-        return sock, addr
+def _text(status: int, body: bytes, extra: dict[str, str] | None = None) -> web.Response:
+    return web.Response(status=status, body=body, headers={"Content-Type": _TEXT, **(extra or {})})
 
 
 class MetricsServer:
@@ -55,99 +51,155 @@ class MetricsServer:
         host: str = "127.0.0.1",
         port: int = 9830,
         web_config: WebConfig | None = None,
+        install: Install | None = None,
     ) -> None:
         self.registry = registry
         self.web_config = web_config or WebConfig()
         self._auth = BasicAuth(self.web_config.basic_auth_users) if self.web_config.basic_auth_users else None
+        self._install = install
+        self._ssl = self.web_config.ssl_context()
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        server_cls = type("_BoundServer", (_Server,), {"address_family": family})
-        self._httpd: _Server = server_cls((host, port), self._handler_class())
-        self._httpd.ssl_context = self.web_config.ssl_context()
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind((host, port))
+            sock.listen(128)
+            sock.setblocking(False)
+        except OSError:
+            sock.close()
+            raise
+        self._sock = sock
+        self._address = sock.getsockname()
         self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stopping: asyncio.Event | None = None
 
     @property
     def host(self) -> str:
-        return str(self._httpd.server_address[0])
+        return str(self._address[0])
 
     @property
     def port(self) -> int:
-        return int(self._httpd.server_address[1])
+        return int(self._address[1])
+
+    @property
+    def base_url(self) -> str:
+        """``http(s)://host:port`` (no path)."""
+        scheme = "https" if self.web_config.tls else "http"
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{scheme}://{host}:{self.port}"
 
     @property
     def url(self) -> str:
-        scheme = "https" if self.web_config.tls else "http"
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"{scheme}://{host}:{self.port}/metrics"
+        return self.base_url + "/metrics"
 
-    def _handler_class(self) -> type[BaseHTTPRequestHandler]:
-        server = self
+    @property
+    def page_url(self) -> str | None:
+        """The address of the page, or None when no page is installed."""
+        return self.base_url + "/" if self._install is not None else None
 
-        class Handler(BaseHTTPRequestHandler):
-            server_version = "tactile-gateway"
-            timeout = 10.0
+    # ------------------------------------------------------------------ the application
+    def _app(self) -> web.Application:
+        app = web.Application(middlewares=[self._guard])
+        app.router.add_get("/metrics", self._metrics)
+        if self._install is not None:
+            self._install(app)
+        else:
+            app.router.add_get("/", self._index)
+        app.on_response_prepare.append(self._headers)
+        return app
 
-            def log_message(self, format: str, *args: Any) -> None:
-                log.debug("http %s - " + format, self.client_address[0], *args)
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        """Basic auth on every path; our plain 404 and 405 for paths we do not serve."""
+        if self._auth is not None:
+            header = request.headers.get("Authorization")
+            # bcrypt costs milliseconds: checked off the loop (verified pairs are cached)
+            ok = await asyncio.get_running_loop().run_in_executor(None, self._auth.check, header)
+            if not ok:
+                return _text(401, b"Unauthorized\n", {"WWW-Authenticate": 'Basic realm="tactile-gateway"'})
+        if request.method not in ("GET", "HEAD"):
+            return _text(405, b"Method not allowed\n", {"Allow": "GET, HEAD"})
+        try:
+            return await handler(request)
+        except web.HTTPNotFound:
+            return _text(404, b"Not found\n")
+        except web.HTTPMethodNotAllowed:
+            return _text(405, b"Method not allowed\n", {"Allow": "GET, HEAD"})
 
-            def _send(self, code: int, body: bytes, content_type: str, extra: Mapping[str, str] = {}) -> None:
-                self.send_response(code)
-                self.send_header("Content-Type", content_type)
-                self.send_header("Content-Length", str(len(body)))
-                for k, v in {**server.web_config.headers, **extra}.items():
-                    self.send_header(k, v)
-                self.end_headers()
-                if self.command != "HEAD":
-                    self.wfile.write(body)
+    async def _headers(self, request: web.Request, response: web.StreamResponse) -> None:
+        response.headers["Server"] = "tactile-gateway"
+        for k, v in self.web_config.headers.items():
+            response.headers[k] = v
 
-            def do_GET(self) -> None:
-                if server._auth is not None and not server._auth.check(self.headers.get("Authorization")):
-                    self._send(
-                        401,
-                        b"Unauthorized\n",
-                        "text/plain; charset=utf-8",
-                        {"WWW-Authenticate": 'Basic realm="tactile-gateway"'},
-                    )
-                    return
-                path = self.path.split("?", 1)[0]
-                if path == "/metrics":
-                    try:
-                        body = generate_latest(server.registry)
-                    except Exception:
-                        log.exception("building the metrics failed")
-                        self._send(500, b"metrics collection failed\n", "text/plain; charset=utf-8")
-                        return
-                    self._send(200, body, CONTENT_TYPE_LATEST)
-                elif path == "/":
-                    page = (
-                        b'<html><body><h1>tactile-gateway</h1><a href="/metrics">metrics</a></body></html>\n'
-                    )
-                    self._send(200, page, "text/html; charset=utf-8")
-                else:
-                    self._send(404, b"Not found\n", "text/plain; charset=utf-8")
+    async def _metrics(self, request: web.Request) -> web.Response:
+        try:
+            body = await asyncio.get_running_loop().run_in_executor(None, generate_latest, self.registry)
+        except Exception:
+            log.exception("building the metrics failed")
+            return _text(500, b"metrics collection failed\n")
+        return web.Response(body=body, headers={"Content-Type": CONTENT_TYPE_LATEST})
 
-            do_HEAD = do_GET
+    async def _index(self, request: web.Request) -> web.Response:
+        return web.Response(body=_INDEX, headers={"Content-Type": "text/html; charset=utf-8"})
 
-        return Handler
+    # ------------------------------------------------------------------ the thread
+    async def _serve(self, ready: threading.Event, failure: list[BaseException]) -> None:
+        self._stopping = asyncio.Event()
+        runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
+                               shutdown_timeout=SHUTDOWN_TIMEOUT_S)  # fmt: skip
+        try:
+            await runner.setup()
+            site = web.SockSite(runner, self._sock, ssl_context=self._ssl)
+            await site.start()
+        except BaseException as exc:
+            failure.append(exc)
+            ready.set()
+            await runner.cleanup()
+            return
+        ready.set()
+        try:
+            await self._stopping.wait()
+        finally:
+            await runner.cleanup()
+
+    def _run(self, ready: threading.Event, failure: list[BaseException]) -> None:
+        loop = self._loop
+        assert loop is not None
+        try:
+            loop.run_until_complete(self._serve(ready, failure))
+            loop.run_until_complete(loop.shutdown_default_executor())
+        finally:
+            loop.close()
 
     def start(self) -> MetricsServer:
         if self._thread is None:
+            ready = threading.Event()
+            failure: list[BaseException] = []
+            self._loop = asyncio.new_event_loop()
             self._thread = threading.Thread(
-                target=self._httpd.serve_forever,
-                kwargs={"poll_interval": 0.2},
-                name="tactile-metrics",
-                daemon=True,
+                target=self._run, args=(ready, failure), name="tactile-metrics", daemon=True
             )
             self._thread.start()
+            ready.wait()
+            if failure:
+                self.stop()
+                raise failure[0]
             log.info("serving metrics on %s", self.url)
         return self
 
     def stop(self) -> None:
         """Stop serving and close the socket; joins the server thread."""
-        if self._thread is not None:
-            self._httpd.shutdown()
-            self._thread.join(timeout=5.0)
-            self._thread = None
-        self._httpd.server_close()
+        thread, loop = self._thread, self._loop
+        if thread is not None and loop is not None:
+            stopping = self._stopping
+            if stopping is not None and not loop.is_closed():
+                with contextlib.suppress(RuntimeError):  # the loop has already closed
+                    loop.call_soon_threadsafe(stopping.set)
+            thread.join(timeout=SHUTDOWN_TIMEOUT_S + 5.0)
+        self._thread = None
+        self._loop = None
+        self._sock.close()
 
     def __enter__(self) -> MetricsServer:
         return self.start()

@@ -97,7 +97,7 @@ def test_service_and_servicemonitor_scrape_metrics() -> None:
 def test_compose_stack_is_wired_together() -> None:
     compose = load_yaml(CONTAINER / "compose.yaml")
     services = compose["services"]
-    assert set(services) == {"sim", "gateway", "prometheus", "grafana"}
+    assert set(services) == {"sim", "gateway", "prometheus", "grafana", "mosquitto"}
     assert services["sim"]["entrypoint"] == ["tactile-sim"]
     assert services["sim"]["command"][:3] == ["run", "--tcp", "0.0.0.0:5020"]
     assert "./gateway.toml:/etc/tactile-gateway/gateway.toml:ro" in services["gateway"]["volumes"]

@@ -24,6 +24,7 @@ ALLOWED: dict[str, set[str]] = {
     "config": {"errors", "atomic", "model", "modbus"},
     "runtime": {"errors", "model", "modbus", "config"},
     "metrics": {"errors", "runtime"},
+    "web": {"errors", "runtime"},
     "mqtt": {"errors", "config", "runtime"},
     "analysis": {"errors", "atomic", "model", "config", "runtime"},
     "cli": {
@@ -35,6 +36,7 @@ ALLOWED: dict[str, set[str]] = {
         "runtime",
         "metrics",
         "mqtt",
+        "web",
         "analysis",
         "sim_device",
     },

@@ -1,0 +1,198 @@
+"""MQTT publishing: frames per second the publisher sustains, and what it costs polling.
+
+Against a local ``mosquitto`` (Debian's, started here on an ephemeral loopback port, no
+persistence), with a simulated 64-channel array in its own process (as ``bench_gateway``):
+
+1. The publisher alone: snapshots of the 64-channel device, one new snapshot object per
+   frame, fed as fast as the publisher takes them (at most 2,000 waiting), for JSON and
+   binary at QoS 1 (acknowledged) and QoS 0; frames per second published, and the payload
+   size. This includes building the frame (the static force estimate of every channel) and
+   encoding it, which run in the publisher's thread.
+2. The gateway's back-to-back poll rate with MQTT on (every poll published, JSON, QoS 1) as
+   a ratio to MQTT off, in alternating rounds of the same run (goal >= 0.9).
+
+Each measurement runs for ``BENCH_SECONDS`` (default 5) seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import os
+import shutil
+import socket
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+from bench.bench_gateway import CHANNELS, _array, _device_of, _end, _sim_process, _split_cores
+from gateway.config import GatewayConfig, bus_config_for, gateway_config_for
+from gateway.config.mqtt import MqttConfig
+from gateway.mqtt.payload import encode_binary, encode_json, frame_dict
+from gateway.mqtt.publisher import MqttPublisher
+from gateway.runtime.poller import Poller
+from gateway.runtime.snapshot import DeviceSnapshot, GatewaySnapshot
+
+MEASURE_S = float(os.environ.get("BENCH_SECONDS", "5"))
+ROUNDS = 5
+MAX_WAITING = 2000
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _start_mosquitto(folder: Path) -> tuple[subprocess.Popen[bytes], int]:
+    exe = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+    port = _free_port()
+    lines = [f"listener {port} 127.0.0.1", "allow_anonymous true", "max_queued_messages 100000"]
+    if os.geteuid() == 0:
+        lines.append("user root")
+    conf = folder / "mosquitto.conf"
+    conf.write_text("\n".join(lines) + "\n")
+    proc = subprocess.Popen([exe, "-c", str(conf)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return proc, port
+        if proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    proc.kill()
+    raise RuntimeError("mosquitto did not start (apt-get install mosquitto)")
+
+
+def _with_mqtt(config: GatewayConfig, port: int, encoding: str, qos: int) -> GatewayConfig:
+    mqtt = MqttConfig(
+        "127.0.0.1", port, None, None, None, f"bench-{encoding}-{qos}", "bench", "gw",
+        qos=qos, encoding=encoding, protocol="5", queue_frames=1_000_000,
+    )  # fmt: skip
+    return dataclasses.replace(config, mqtt=mqtt)
+
+
+def _publisher_rate(config: GatewayConfig, snap: DeviceSnapshot) -> float:
+    """Frames per second published (acknowledged at QoS 1) by a publisher fed without pause."""
+    publisher = MqttPublisher(config)
+    publisher.start()
+    try:
+        deadline = time.monotonic() + 10.0
+        while not publisher.stats().connected:
+            if time.monotonic() > deadline:
+                raise RuntimeError("the publisher did not connect")
+            time.sleep(0.01)
+        i = 0
+
+        def feed_until(t_end: float) -> None:
+            nonlocal i
+            while time.monotonic() < t_end:
+                if publisher.stats().queued >= MAX_WAITING:
+                    time.sleep(0.0005)
+                    continue
+                i += 1
+                dev = dataclasses.replace(snap, timestamp_s=snap.timestamp_s + i)
+                publisher.on_snapshot(GatewaySnapshot.build({snap.device: dev}, {}, i))
+
+        feed_until(time.monotonic() + min(1.0, MEASURE_S / 5))  # warm-up
+        start_count, t0 = publisher.stats().published.get(snap.device, 0), time.monotonic()
+        feed_until(t0 + MEASURE_S)
+        end_count, t1 = publisher.stats().published.get(snap.device, 0), time.monotonic()
+        if publisher.stats().dropped.get(snap.device, 0):
+            raise RuntimeError("frames were dropped")
+        return (end_count - start_count) / (t1 - t0)
+    finally:
+        publisher.stop()
+
+
+async def _poll_rates(config: GatewayConfig) -> tuple[float, float, int]:
+    """Back-to-back polls per second without and with publishing, alternating rounds."""
+    poller = Poller(config)
+    worker = poller.workers[0]
+    runner = worker.runners[0]
+    publisher = MqttPublisher(config)
+    on = False
+
+    def forward(snapshot: GatewaySnapshot) -> None:
+        if on:
+            publisher.on_snapshot(snapshot)
+
+    poller.holder.subscribe(forward)
+    publisher.start()
+    await worker.transport.connect()
+    slot = MEASURE_S / ROUNDS
+    rates: dict[bool, list[float]] = {False: [], True: []}
+    try:
+        for _ in range(ROUNDS):
+            for state in (False, True):
+                on = state
+                for _ in range(5):
+                    await worker.poll_device(runner)
+                n, t0 = 0, time.perf_counter()
+                while (elapsed := time.perf_counter() - t0) < slot:
+                    if not await worker.poll_device(runner):
+                        raise RuntimeError(f"poll failed: {runner.last_error}")
+                    n += 1
+                rates[state].append(n / elapsed)
+                worker.settle_now(runner)
+    finally:
+        on = False
+        await worker.close()
+        await asyncio.to_thread(publisher.stop)
+    stats = publisher.stats()
+    dropped = sum(stats.dropped.values())
+    return sum(rates[False]) / ROUNDS, sum(rates[True]) / ROUNDS, dropped
+
+
+async def bench() -> None:
+    array = _array()
+    proc, port = await _sim_process()
+    all_cores = os.sched_getaffinity(0)
+    cores = _split_cores(proc.pid)
+    with tempfile.TemporaryDirectory() as tmp:
+        broker, broker_port = _start_mosquitto(Path(tmp))
+        try:
+            bus = bus_config_for("bench", "tcp", [_device_of(array)], host="127.0.0.1", port=port)
+            base = gateway_config_for([bus])
+            # one real snapshot of the 64-channel device to publish copies of
+            poller = Poller(base)
+            worker = poller.workers[0]
+            await worker.transport.connect()
+            for _ in range(3):
+                await worker.poll_device(worker.runners[0])
+            worker.settle_now(worker.runners[0])
+            await worker.close()
+            snap = poller.holder.get().devices["bench"]
+            print(f"MQTT, local mosquitto, {CHANNELS}-channel frames; {cores}")
+            frame = frame_dict(snap, 1)
+            sizes = {"json": len(encode_json(frame)), "binary": len(encode_binary(frame))}
+            for encoding in ("json", "binary"):
+                for qos in (1, 0):
+                    rate = await asyncio.to_thread(
+                        _publisher_rate, _with_mqtt(base, broker_port, encoding, qos), snap
+                    )
+                    print(
+                        f"  publisher, {encoding:6s} ({sizes[encoding]:5d} bytes), QoS {qos}: "
+                        f"{rate:8.0f} frames/s"
+                    )
+            off, on, dropped = await _poll_rates(_with_mqtt(base, broker_port, "json", 1))
+            print(f"  gateway back-to-back polls, MQTT off: {off:8.1f} polls/s")
+            print(
+                f"  gateway back-to-back polls, MQTT on:  {on:8.1f} polls/s (JSON, QoS 1; {dropped} dropped)"
+            )
+            print(f"  ratio on / off: {on / off:.3f} (goal >= 0.9)")
+        finally:
+            broker.terminate()
+            broker.wait(timeout=10)
+            os.sched_setaffinity(0, all_cores)
+            await _end(proc)
+
+
+def main() -> None:
+    asyncio.run(bench())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,209 @@
+"""The page and the API on the gateway's HTTP server (aiohttp routes, all read-only).
+
+``WebPage(hub).install(app)`` adds:
+
+* ``/`` and ``/static/{file}``: the live pressure-map page (static files shipped in the
+  package; strict Content-Security-Policy, no inline script or style);
+* ``/api/devices``: every device with its layout, units, status labels and stream counters;
+* ``/api/devices/{name}``: one device's layout; ``/api/devices/{name}/frame``: its latest
+  frame;
+* ``/api/devices/{name}/stream``: server-sent events, **every** poll of the device (``id``
+  is the sequence number; a client that falls behind loses the oldest frames, sees a gap and
+  each frame carries ``dropped``, its count of lost frames; the hub counts them per device);
+* ``/api/live[?device=NAME...]``: server-sent events for the page, the newest frame of each
+  device at most ``max_fps`` times a second (newest frame wins, no queue).
+
+The hub is attached to the server's loop while the application runs (``on_startup``) and
+every stream is ended when it stops (``on_shutdown``), so a stop never waits on a client.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import time
+from collections.abc import Callable
+from importlib import resources
+from typing import Any
+
+from aiohttp import web
+
+from .frames import encode_frame, layout_json, with_dropped
+from .hub import FrameHub
+
+#: The page's policy: nothing but its own files and its own API; no inline anything.
+CSP = (
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+    "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+)
+STATIC_FILES: dict[str, str] = {
+    "index.html": "text/html; charset=utf-8",
+    "app.js": "text/javascript; charset=utf-8",
+    "style.css": "text/css; charset=utf-8",
+}
+KEEPALIVE_S = 15.0
+_SSE_HEADERS = {"Content-Type": "text/event-stream", "Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
+_ENDED = (ConnectionError, RuntimeError)  # the client went away mid-write
+
+
+def _json(data: Any, status: int = 200) -> web.Response:
+    body = json.dumps(data, separators=(",", ":"), allow_nan=False).encode()
+    return web.Response(status=status, body=body, headers={"Content-Type": "application/json"})
+
+
+class WebPage:
+    """The pressure-map page and its API over a ``FrameHub``."""
+
+    def __init__(
+        self,
+        hub: FrameHub,
+        *,
+        max_fps: float = 30.0,
+        scale_max_n: float = 5.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.hub = hub
+        self.max_fps = max_fps
+        self.scale_max_n = scale_max_n
+        self._clock = clock
+        self._files = {name: resources.files(__package__).joinpath("static", name).read_bytes()
+                       for name in STATIC_FILES}  # fmt: skip
+
+    def install(self, app: web.Application) -> None:
+        r = app.router
+        r.add_get("/", self._index)
+        r.add_get("/static/{file}", self._static)
+        r.add_get("/api/devices", self._devices)
+        r.add_get("/api/devices/{name}", self._device)
+        r.add_get("/api/devices/{name}/frame", self._frame)
+        r.add_get("/api/devices/{name}/stream", self._stream)
+        r.add_get("/api/live", self._live)
+        app.on_startup.append(self._attach)
+        app.on_shutdown.append(self._close)
+        app.on_cleanup.append(self._detach)
+        app.on_response_prepare.append(self._policy)
+
+    # ------------------------------------------------------------------ lifecycle
+    async def _attach(self, app: web.Application) -> None:
+        self.hub.attach(asyncio.get_running_loop().call_soon_threadsafe)
+
+    async def _close(self, app: web.Application) -> None:
+        self.hub.close_all()
+
+    async def _detach(self, app: web.Application) -> None:
+        self.hub.detach()
+
+    async def _policy(self, request: web.Request, response: web.StreamResponse) -> None:
+        if request.path != "/metrics":
+            response.headers["Content-Security-Policy"] = CSP
+            response.headers["X-Content-Type-Options"] = "nosniff"
+            response.headers.setdefault("Referrer-Policy", "no-referrer")
+
+    # ------------------------------------------------------------------ page
+    def _file(self, name: str) -> web.Response:
+        return web.Response(body=self._files[name], headers={"Content-Type": STATIC_FILES[name],
+                                                             "Cache-Control": "no-cache"})  # fmt: skip
+
+    async def _index(self, request: web.Request) -> web.Response:
+        return self._file("index.html")
+
+    async def _static(self, request: web.Request) -> web.Response:
+        name = request.match_info["file"]
+        if name not in STATIC_FILES:
+            raise web.HTTPNotFound()
+        return self._file(name)
+
+    # ------------------------------------------------------------------ API
+    def _describe(self, name: str) -> dict[str, Any] | None:
+        entry = self.hub.latest(name)
+        if entry is None:
+            return None
+        out = layout_json(entry.snapshot, self.scale_max_n)
+        out.update(
+            up=entry.snapshot.up,
+            seq=entry.seq,
+            stream_frames_dropped_total=self.hub.dropped_total.get(name, 0),
+        )
+        return out
+
+    async def _devices(self, request: web.Request) -> web.Response:
+        names = [e.snapshot.device for e in self.hub.devices()]
+        streams, pages = self.hub.clients()
+        return _json({
+            "devices": [d for n in names if (d := self._describe(n)) is not None],
+            "clients": {"stream": streams, "page": pages},
+            "max_fps": self.max_fps,
+        })  # fmt: skip
+
+    async def _device(self, request: web.Request) -> web.Response:
+        described = self._describe(request.match_info["name"])
+        if described is None:
+            raise web.HTTPNotFound()
+        return _json(described)
+
+    async def _frame(self, request: web.Request) -> web.Response:
+        entry = self.hub.latest(request.match_info["name"])
+        if entry is None:
+            raise web.HTTPNotFound()
+        body = encode_frame(entry.snapshot, entry.seq, entry.counters)
+        return web.Response(body=body, headers={"Content-Type": "application/json"})
+
+    @staticmethod
+    async def _open_events(resp: web.StreamResponse, request: web.Request) -> None:
+        await resp.prepare(request)
+        await resp.write(b"retry: 1000\n\n")
+
+    async def _stream(self, request: web.Request) -> web.StreamResponse:
+        name = request.match_info["name"]
+        if self.hub.latest(name) is None:
+            raise web.HTTPNotFound()
+        wake = asyncio.Event()
+        q = self.hub.open_stream(name, wake.set)
+        resp = web.StreamResponse(headers=_SSE_HEADERS)
+        try:
+            await self._open_events(resp, request)
+            while not q.closed:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(wake.wait(), KEEPALIVE_S)
+                wake.clear()
+                frames = q.take()
+                if frames:
+                    chunk = b"".join(b"id: %d\nevent: frame\ndata: %s\n\n" % (seq, with_dropped(f, q.dropped))
+                                     for seq, f in frames)  # fmt: skip
+                else:
+                    chunk = b": keepalive\n\n"
+                await resp.write(chunk)
+        except _ENDED:
+            pass
+        finally:
+            self.hub.close_stream(q)
+        return resp
+
+    async def _live(self, request: web.Request) -> web.StreamResponse:
+        wanted = frozenset(request.query.getall("device", [])) or None
+        wake = asyncio.Event()
+        p = self.hub.open_page(wanted, self.max_fps, wake.set)
+        for entry in self.hub.devices():  # draw at once, then follow
+            p.offer(entry.snapshot.device, encode_frame(entry.snapshot, entry.seq, entry.counters))
+        resp = web.StreamResponse(headers=_SSE_HEADERS)
+        try:
+            await self._open_events(resp, request)
+            while not p.closed:
+                wait = p.wait_s(self._clock())
+                if wait is None:
+                    try:
+                        await asyncio.wait_for(wake.wait(), KEEPALIVE_S)
+                    except TimeoutError:
+                        await resp.write(b": keepalive\n\n")
+                    wake.clear()
+                    continue
+                if wait > 0:
+                    await asyncio.sleep(wait)  # newer frames replace pending ones meanwhile
+                frames = p.take(self._clock())
+                await resp.write(b"".join(b"event: frame\ndata: %s\n\n" % f for f in frames))
+        except _ENDED:
+            pass
+        finally:
+            self.hub.close_page(p)
+        return resp

@@ -1,0 +1,107 @@
+"""The JSON the page and programs read: a device's layout, and one frame per poll.
+
+``layout_json`` describes a device once (channel names and positions in mm, units, the
+status codes' labels); ``encode_frame`` turns one ``DeviceSnapshot`` into the bytes of one
+frame (forces in N and status codes per channel in layout order, the array quantities, the
+device's health counters). A value that is not a finite number is ``null``, never NaN, so
+every frame is strict JSON. Frames are encoded once per poll and shared by every client.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from typing import Any
+
+from ..runtime.counters import DeviceCounters
+from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot
+
+#: Units of every quantity in the API, as listed with each device.
+UNITS: dict[str, str] = {
+    "force": "N",
+    "position": "mm",
+    "area": "mm^2",
+    "time": "s",
+}
+
+
+def num(x: float | None, digits: int = 6) -> float | None:
+    """``x`` rounded to ``digits`` decimals, or None where it is absent or not finite."""
+    if x is None:
+        return None
+    x = float(x)
+    return round(x, digits) if math.isfinite(x) else None
+
+
+def num_list(values: Iterable[float], digits: int = 6) -> list[float | None]:
+    return [num(float(v), digits) for v in values]
+
+
+def _channel(dev: DeviceSnapshot, k: int) -> dict[str, Any]:
+    return {
+        "index": int(dev.channel_index[k]),
+        "name": dev.channel_names[k],
+        "x_mm": num(float(dev.x_mm[k])),
+        "y_mm": num(float(dev.y_mm[k])),
+    }
+
+
+def layout_json(dev: DeviceSnapshot, scale_max_n: float) -> dict[str, Any]:
+    """The static description of a device: channels, positions (mm, y grows downward as
+    drawn), units, the status labels by code and the fixed colour scale of the page (N)."""
+    return {
+        "name": dev.device,
+        "bus": dev.bus,
+        "poll_interval_s": num(dev.poll_interval_s),
+        "units": UNITS,
+        "status_labels": list(STATUS_LABELS),
+        "scale_n": [0.0, float(scale_max_n)],
+        "channels": [
+            {
+                "index": int(dev.channel_index[k]),
+                "name": dev.channel_names[k],
+                "x_mm": num(float(dev.x_mm[k])),
+                "y_mm": num(float(dev.y_mm[k])),
+            }
+            for k in range(dev.n_channels)
+        ],
+    }
+
+
+def frame_json(dev: DeviceSnapshot, seq: int, counters: DeviceCounters | None) -> dict[str, Any]:
+    """One poll of one device as a JSON-ready mapping (see ``encode_frame``)."""
+    cop = dev.center_of_pressure_mm
+    c = counters or DeviceCounters()
+    return {
+        "device": dev.device,
+        "seq": seq,
+        "t": num(dev.timestamp_s),
+        "device_time_s": num(dev.device_time_s),
+        "last_success_t": num(dev.last_success_timestamp_s),
+        "up": dev.up,
+        "error": dev.error,
+        "force_n": num_list(dev.force_n),
+        "status": [int(s) for s in dev.status],
+        "total_force_n": num(dev.total_force_n),
+        "cop_mm": None if cop is None else [num(cop[0]), num(cop[1])],
+        "contact_area_mm2": num(dev.contact_area_mm2),
+        "channels_in_contact": dev.channels_in_contact,
+        "peak_channel": dev.peak_channel,
+        "peak_force_n": num(dev.peak_force_n),
+        "poll_interval_s": num(dev.poll_interval_s),
+        "polls_total": c.polls_total,
+        "reads_total": c.reads_total,
+        "read_errors_total": sum(c.read_errors_total.values()),
+    }
+
+
+def encode_frame(dev: DeviceSnapshot, seq: int, counters: DeviceCounters | None) -> bytes:
+    """The compact UTF-8 JSON of one frame: an object starting with ``{"device":``."""
+    return json.dumps(frame_json(dev, seq, counters), separators=(",", ":"), allow_nan=False).encode()
+
+
+def with_dropped(frame: bytes, dropped: int) -> bytes:
+    """``frame`` with a leading ``"dropped": n`` member (frames this client has lost so far),
+    without decoding it again."""
+    return b'{"dropped":%d,%s' % (dropped, frame[1:])

@@ -1,0 +1,242 @@
+"""Fan-out of every poll to the page and stream clients, without ever holding up the poller.
+
+The poller publishes a ``GatewaySnapshot`` after each device poll (in its own thread and
+loop); ``FrameHub.on_snapshot`` only notes which device changed, numbers that poll (a per-
+device sequence from 1) and hands it to the server's loop through a bounded inbox, waking
+that loop at most once per batch. In the server's loop ``drain`` encodes each frame once and
+offers it to the clients:
+
+* ``StreamQueue``: every frame of one device for a program, bounded; when full the oldest
+  frame is dropped and counted, so a client that falls behind sees a gap in ``seq`` and the
+  hub counts the frames dropped for it (``dropped_total``). A gap already in the offered
+  sequence (the inbox overflowed) counts the same way.
+* ``PageQueue``: the newest frame per device for a browser, at most ``max_fps`` batches a
+  second; a frame not yet sent is replaced by a newer one (newest frame wins), so a slow or
+  stalled browser never grows a queue.
+
+Nothing here sleeps or reads a clock by itself: times are passed in, so the logic is driven
+deterministically in tests.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from ..runtime.counters import DeviceCounters
+from ..runtime.poller import SnapshotHolder
+from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
+from .frames import encode_frame
+
+Wakeup = Callable[[], None]
+Schedule = Callable[[Callable[[], None]], object]
+
+
+def _noop() -> None:
+    return None
+
+
+class StreamQueue:
+    """Every frame of one device for one client; at most ``capacity`` waiting."""
+
+    def __init__(self, device: str, capacity: int = 256, wakeup: Wakeup = _noop) -> None:
+        if capacity < 1:
+            raise ValueError("capacity must be >= 1")
+        self.device = device
+        self.capacity = capacity
+        self.dropped = 0
+        self._frames: deque[tuple[int, bytes]] = deque()
+        self._next_seq: int | None = None
+        self._wakeup = wakeup
+        self.closed = False
+
+    def offer(self, seq: int, frame: bytes) -> int:
+        """Queue one frame; returns how many frames this offer dropped (gap + evicted)."""
+        lost = 0
+        if self._next_seq is not None and seq > self._next_seq:
+            lost += seq - self._next_seq  # never offered: the hub's inbox overflowed
+        self._next_seq = max(seq + 1, self._next_seq or 0)
+        self._frames.append((seq, frame))
+        while len(self._frames) > self.capacity:
+            self._frames.popleft()
+            lost += 1
+        self.dropped += lost
+        self._wakeup()
+        return lost
+
+    def expect(self, seq: int) -> None:
+        """The sequence number of the next frame: fewer than that later is a gap."""
+        self._next_seq = seq
+
+    def take(self) -> list[tuple[int, bytes]]:
+        """Everything waiting, oldest first."""
+        out = list(self._frames)
+        self._frames.clear()
+        return out
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+
+class PageQueue:
+    """The newest frame of each device for one browser, at most ``max_fps`` batches/s."""
+
+    def __init__(self, devices: frozenset[str] | None = None, max_fps: float = 30.0, wakeup: Wakeup = _noop):
+        self.devices = devices  # None: every device
+        self.min_interval_s = 1.0 / max_fps
+        self.superseded = 0  # frames replaced before they were sent
+        self._pending: dict[str, bytes] = {}
+        self._last_sent: float | None = None
+        self._wakeup = wakeup
+        self.closed = False
+
+    def offer(self, device: str, frame: bytes) -> None:
+        if self.devices is not None and device not in self.devices:
+            return
+        if device in self._pending:
+            self.superseded += 1
+        self._pending[device] = frame
+        self._wakeup()
+
+    def wait_s(self, now: float) -> float | None:
+        """None when nothing is pending, else how long to wait before ``take`` (0: now)."""
+        if not self._pending:
+            return None
+        if self._last_sent is None:
+            return 0.0
+        return max(0.0, self._last_sent + self.min_interval_s - now)
+
+    def take(self, now: float) -> list[bytes]:
+        """The pending frames (one per device) and the send time noted."""
+        out = list(self._pending.values())
+        self._pending.clear()
+        self._last_sent = now
+        return out
+
+
+@dataclass(frozen=True)
+class Latest:
+    """The newest poll of one device as the hub last saw it."""
+
+    seq: int
+    snapshot: DeviceSnapshot
+    counters: DeviceCounters | None
+
+
+class FrameHub:
+    """Numbers every device poll and offers its encoded frame to the attached clients."""
+
+    def __init__(
+        self, holder: SnapshotHolder | None = None, *, stream_capacity: int = 256, inbox_capacity: int = 4096
+    ) -> None:
+        self.stream_capacity = stream_capacity
+        self.inbox_capacity = inbox_capacity
+        self._lock = threading.Lock()
+        self._latest: dict[str, Latest] = {}
+        self._inbox: deque[tuple[str, Latest]] = deque()
+        self._schedule: Schedule | None = None
+        self._wake_pending = False
+        self._streams: dict[str, set[StreamQueue]] = {}
+        self._pages: set[PageQueue] = set()
+        self.dropped_total: dict[str, int] = {}
+        self.inbox_dropped = 0
+        if holder is not None:
+            holder.subscribe(self.on_snapshot)
+            self.on_snapshot(holder.get())
+
+    # ------------------------------------------------------------------ poller side (any thread)
+    def on_snapshot(self, snap: GatewaySnapshot) -> None:
+        """Note the devices polled since the last call; cheap, never blocks on clients."""
+        wake: Schedule | None = None
+        with self._lock:
+            for name, dev in snap.devices.items():
+                old = self._latest.get(name)
+                if old is not None and old.snapshot is dev:
+                    continue
+                entry = Latest(1 if old is None else old.seq + 1, dev, snap.counters.get(name))
+                self._latest[name] = entry
+                if self._schedule is not None:
+                    if len(self._inbox) >= self.inbox_capacity:
+                        self._inbox.popleft()
+                        self.inbox_dropped += 1
+                    self._inbox.append((name, entry))
+            for name in [n for n in self._latest if n not in snap.devices]:
+                del self._latest[name]
+            if self._inbox and self._schedule is not None and not self._wake_pending:
+                self._wake_pending = True
+                wake = self._schedule
+        if wake is not None:
+            wake(self.drain)
+
+    def latest(self, device: str) -> Latest | None:
+        with self._lock:
+            return self._latest.get(device)
+
+    def devices(self) -> list[Latest]:
+        with self._lock:
+            return [self._latest[n] for n in sorted(self._latest)]
+
+    # ------------------------------------------------------------------ server side (its loop)
+    def attach(self, schedule: Schedule) -> None:
+        """From now on, hand polls to ``schedule(drain)`` (``loop.call_soon_threadsafe``)."""
+        with self._lock:
+            self._schedule = schedule
+            self._wake_pending = False
+
+    def detach(self) -> None:
+        with self._lock:
+            self._schedule = None
+            self._inbox.clear()
+            self._wake_pending = False
+
+    def drain(self) -> None:
+        """Encode the waiting polls once each and offer them to every client."""
+        with self._lock:
+            batch = list(self._inbox)
+            self._inbox.clear()
+            self._wake_pending = False
+        for name, entry in batch:
+            frame = encode_frame(entry.snapshot, entry.seq, entry.counters)
+            for q in self._streams.get(name, ()):
+                lost = q.offer(entry.seq, frame)
+                if lost:
+                    self.dropped_total[name] = self.dropped_total.get(name, 0) + lost
+            for p in self._pages:
+                p.offer(name, frame)
+
+    def open_stream(self, device: str, wakeup: Wakeup = _noop) -> StreamQueue:
+        """A new stream client of ``device``: it gets every poll from the next one on."""
+        q = StreamQueue(device, self.stream_capacity, wakeup)
+        latest = self.latest(device)
+        q.expect(1 if latest is None else latest.seq + 1)
+        self._streams.setdefault(device, set()).add(q)
+        return q
+
+    def close_stream(self, q: StreamQueue) -> None:
+        q.closed = True
+        self._streams.get(q.device, set()).discard(q)
+        q._wakeup()
+
+    def open_page(self, devices: frozenset[str] | None, max_fps: float, wakeup: Wakeup = _noop) -> PageQueue:
+        p = PageQueue(devices, max_fps, wakeup)
+        self._pages.add(p)
+        return p
+
+    def close_page(self, p: PageQueue) -> None:
+        p.closed = True
+        self._pages.discard(p)
+        p._wakeup()
+
+    def close_all(self) -> None:
+        """End every client (server shutdown): their senders see ``closed`` and return."""
+        for qs in list(self._streams.values()):
+            for q in list(qs):
+                self.close_stream(q)
+        for p in list(self._pages):
+            self.close_page(p)
+
+    def clients(self) -> tuple[int, int]:
+        """(stream clients, page clients) now connected."""
+        return sum(len(s) for s in self._streams.values()), len(self._pages)

@@ -1,0 +1,441 @@
+// tactile-gateway live pressure map: plain browser JavaScript, no build step, no CDN.
+// Reads /api/devices (layout) and follows /api/live (server-sent events, newest frame of each
+// device at most ~30/s). Draws a colour map of forces at the channels' configured positions
+// (y grows downward), channel statuses, the centre of pressure with a short trail, total
+// force and contact area over the last 30 s, and the device's health.
+"use strict";
+
+const ST = { OK: 0, NO_CONTACT: 1, SATURATED: 2, OPEN: 3, SHORT: 4, STALE: 5, ERROR: 6 };
+const HISTORY_S = 30;
+const TRAIL_S = 2;
+// a perceptual dark-to-bright map (inferno-like): 0 N is near black, the scale's top is pale yellow
+const STOPS = [
+  [0.0, [0, 0, 4]], [0.15, [40, 11, 84]], [0.3, [101, 21, 110]], [0.45, [159, 42, 99]],
+  [0.6, [212, 72, 66]], [0.75, [245, 125, 21]], [0.9, [250, 193, 39]], [1.0, [252, 255, 164]],
+];
+
+const devices = new Map(); // name -> device state
+let selected = null;
+let dirty = true;
+let lastDraw = 0;
+
+function $(id) { return document.getElementById(id); }
+
+function colour(f, max) {
+  const t = Math.max(0, Math.min(1, f / max));
+  for (let i = 1; i < STOPS.length; i++) {
+    if (t <= STOPS[i][0]) {
+      const [t0, c0] = STOPS[i - 1];
+      const [t1, c1] = STOPS[i];
+      const u = (t - t0) / (t1 - t0);
+      return c0.map((c, k) => Math.round(c + u * (c1[k] - c)));
+    }
+  }
+  return STOPS[STOPS.length - 1][1];
+}
+function rgb(c) { return `rgb(${c[0]},${c[1]},${c[2]})`; }
+function fmt(x, digits) { return x === null || x === undefined ? "–" : x.toFixed(digits); }
+
+// ---------------------------------------------------------------- layout
+function geometry(layout) {
+  const xs = layout.channels.map((c) => c.x_mm);
+  const ys = layout.channels.map((c) => c.y_mm);
+  let pitch = Infinity;
+  for (let i = 0; i < xs.length; i++) {
+    for (let j = i + 1; j < xs.length; j++) {
+      const d = Math.hypot(xs[i] - xs[j], ys[i] - ys[j]);
+      if (d > 1e-9 && d < pitch) pitch = d;
+    }
+  }
+  if (!Number.isFinite(pitch)) pitch = 1;
+  return {
+    pitch, xs, ys,
+    x0: Math.min(...xs) - pitch / 2, x1: Math.max(...xs) + pitch / 2,
+    y0: Math.min(...ys) - pitch / 2, y1: Math.max(...ys) + pitch / 2,
+  };
+}
+
+function transform(geo, w, h, margin) {
+  const s = Math.min((w - 2 * margin) / (geo.x1 - geo.x0), (h - 2 * margin) / (geo.y1 - geo.y0));
+  const ox = (w - s * (geo.x1 - geo.x0)) / 2 - s * geo.x0;
+  const oy = (h - s * (geo.y1 - geo.y0)) / 2 - s * geo.y0;
+  return { s, px: (x) => ox + s * x, py: (y) => oy + s * y, mx: (px) => (px - ox) / s, my: (py) => (py - oy) / s };
+}
+
+async function loadDevices() {
+  const resp = await fetch("/api/devices", { cache: "no-store" });
+  if (!resp.ok) throw new Error(`/api/devices: ${resp.status}`);
+  const data = await resp.json();
+  const names = new Set();
+  for (const layout of data.devices) {
+    names.add(layout.name);
+    const old = devices.get(layout.name);
+    devices.set(layout.name, {
+      layout, geo: geometry(layout), frame: old ? old.frame : null, arrived: old ? old.arrived : 0,
+      history: old ? old.history : [], trail: old ? old.trail : [], polls: old ? old.polls : [],
+    });
+  }
+  for (const name of [...devices.keys()]) if (!names.has(name)) devices.delete(name);
+  buildOverview();
+  route();
+}
+
+// ---------------------------------------------------------------- frames
+let reloading = null;
+function onFrame(f) {
+  const d = devices.get(f.device);
+  if (!d || d.layout.channels.length !== f.force_n.length) {
+    if (!reloading) reloading = loadDevices().catch(() => {}).finally(() => { reloading = null; });
+    return;
+  }
+  const now = performance.now();
+  d.frame = f;
+  d.arrived = now;
+  if (f.t !== null) {
+    d.history.push([f.t, f.total_force_n, f.contact_area_mm2]);
+    while (d.history.length && d.history[0][0] < f.t - HISTORY_S) d.history.shift();
+    if (f.cop_mm) d.trail.push([f.t, f.cop_mm[0], f.cop_mm[1]]);
+    while (d.trail.length && d.trail[0][0] < f.t - TRAIL_S) d.trail.shift();
+  }
+  d.polls.push([now, f.polls_total]);
+  while (d.polls.length > 2 && d.polls[0][0] < now - 3000) d.polls.shift();
+  dirty = true;
+}
+
+function connect() {
+  const es = new EventSource("/api/live");
+  es.addEventListener("frame", (ev) => onFrame(JSON.parse(ev.data)));
+  es.addEventListener("open", () => { $("conn").textContent = "live"; $("conn").className = "conn live"; });
+  es.addEventListener("error", () => { $("conn").textContent = "reconnecting…"; $("conn").className = "conn"; });
+}
+
+// "up", "stale" (the gateway could not read it, or no frame lately) or "waiting"
+function deviceState(d, now) {
+  if (!d.frame) return "waiting";
+  const limit = Math.max(1500, 5000 * (d.frame.poll_interval_s || 0.1));
+  if (!d.frame.up || now - d.arrived > limit) return "stale";
+  return "up";
+}
+
+// ---------------------------------------------------------------- drawing
+function drawMap(canvas, d, opts) {
+  const ctx = canvas.getContext("2d");
+  const w = canvas.width;
+  const h = canvas.height;
+  ctx.fillStyle = "#000";
+  ctx.fillRect(0, 0, w, h);
+  const geo = d.geo;
+  const tr = transform(geo, w, h, opts.margin);
+  const f = d.frame;
+  const max = d.layout.scale_n[1];
+  const side = tr.s * geo.pitch * 0.92;
+  const stale = deviceState(d, performance.now()) === "stale";
+  if (opts.smooth && f) drawSmooth(ctx, d, tr, max);
+  d.layout.channels.forEach((c, k) => {
+    const status = f ? f.status[k] : ST.STALE;
+    const force = f ? f.force_n[k] : null;
+    const x = tr.px(c.x_mm) - side / 2;
+    const y = tr.py(c.y_mm) - side / 2;
+    let label = null;
+    if (status === ST.OK || status === ST.NO_CONTACT || status === ST.SATURATED) {
+      if (!opts.smooth) {
+        ctx.fillStyle = rgb(colour(force || 0, max));
+        ctx.fillRect(x, y, side, side);
+      }
+      if (status === ST.SATURATED) {
+        ctx.strokeStyle = "#fff";
+        ctx.lineWidth = Math.max(2, side * 0.06);
+        ctx.strokeRect(x + 2, y + 2, side - 4, side - 4);
+        label = "SAT";
+      }
+    } else {
+      const fill = { [ST.OPEN]: ["#555", "#222"], [ST.SHORT]: ["#d0307a", "#401020"],
+                     [ST.STALE]: ["#3a4048", "#3a4048"], [ST.ERROR]: ["#000", "#000"] }[status] || ["#000", "#000"];
+      hatch(ctx, x, y, side, fill[0], fill[1]);
+      label = { [ST.OPEN]: "OPEN", [ST.SHORT]: "SHORT", [ST.STALE]: "STALE", [ST.ERROR]: "ERR" }[status];
+      if (status === ST.ERROR) { ctx.strokeStyle = "#f33"; ctx.lineWidth = 2; ctx.strokeRect(x, y, side, side); }
+    }
+    if (stale && status !== ST.STALE) {
+      ctx.fillStyle = "rgba(58,64,72,0.7)";
+      ctx.fillRect(x, y, side, side);
+    }
+    if (label && side > 26) {
+      ctx.fillStyle = "#fff";
+      ctx.font = `${Math.max(9, Math.min(16, side / 5))}px sans-serif`;
+      ctx.textAlign = "center";
+      ctx.textBaseline = "middle";
+      ctx.fillText(label, x + side / 2, y + side / 2);
+    }
+  });
+  if (f && opts.trail) drawTrail(ctx, d, tr, f);
+}
+
+function hatch(ctx, x, y, side, a, b) {
+  ctx.fillStyle = b;
+  ctx.fillRect(x, y, side, side);
+  ctx.save();
+  ctx.beginPath();
+  ctx.rect(x, y, side, side);
+  ctx.clip();
+  ctx.strokeStyle = a;
+  ctx.lineWidth = Math.max(2, side / 14);
+  for (let k = -side; k < side; k += side / 5) {
+    ctx.beginPath();
+    ctx.moveTo(x + k, y + side);
+    ctx.lineTo(x + k + side, y);
+    ctx.stroke();
+  }
+  ctx.restore();
+}
+
+function drawSmooth(ctx, d, tr, max) {
+  // a Gaussian-weighted interpolation of the valued channels on a coarse grid, scaled up
+  const f = d.frame;
+  const n = 96;
+  const img = ctx.createImageData(n, n);
+  const geo = d.geo;
+  const sigma2 = 2 * (0.6 * geo.pitch) ** 2;
+  const pts = [];
+  d.layout.channels.forEach((c, k) => {
+    const s = f.status[k];
+    if (s === ST.OK || s === ST.NO_CONTACT || s === ST.SATURATED) pts.push([c.x_mm, c.y_mm, f.force_n[k] || 0]);
+  });
+  for (let j = 0; j < n; j++) {
+    const ym = geo.y0 + ((j + 0.5) / n) * (geo.y1 - geo.y0);
+    for (let i = 0; i < n; i++) {
+      const xm = geo.x0 + ((i + 0.5) / n) * (geo.x1 - geo.x0);
+      let sw = 0;
+      let sv = 0;
+      for (const [px, py, v] of pts) {
+        const wgt = Math.exp(-((xm - px) ** 2 + (ym - py) ** 2) / sigma2);
+        sw += wgt;
+        sv += wgt * v;
+      }
+      const c = colour(sw > 1e-6 ? sv / sw : 0, max);
+      const o = 4 * (j * n + i);
+      img.data[o] = c[0]; img.data[o + 1] = c[1]; img.data[o + 2] = c[2]; img.data[o + 3] = 255;
+    }
+  }
+  const off = document.createElement("canvas");
+  off.width = n;
+  off.height = n;
+  off.getContext("2d").putImageData(img, 0, 0);
+  ctx.imageSmoothingEnabled = true;
+  ctx.drawImage(off, tr.px(geo.x0), tr.py(geo.y0), tr.s * (geo.x1 - geo.x0), tr.s * (geo.y1 - geo.y0));
+}
+
+function drawTrail(ctx, d, tr, f) {
+  const pts = d.trail;
+  ctx.lineWidth = 2;
+  for (let i = 1; i < pts.length; i++) {
+    const age = (f.t - pts[i][0]) / TRAIL_S;
+    ctx.strokeStyle = `rgba(95,179,255,${Math.max(0.1, 1 - age)})`;
+    ctx.beginPath();
+    ctx.moveTo(tr.px(pts[i - 1][1]), tr.py(pts[i - 1][2]));
+    ctx.lineTo(tr.px(pts[i][1]), tr.py(pts[i][2]));
+    ctx.stroke();
+  }
+  if (f.cop_mm) {
+    const x = tr.px(f.cop_mm[0]);
+    const y = tr.py(f.cop_mm[1]);
+    ctx.strokeStyle = "#5fb3ff";
+    ctx.fillStyle = "#fff";
+    ctx.lineWidth = 3;
+    ctx.beginPath();
+    ctx.arc(x, y, 8, 0, 2 * Math.PI);
+    ctx.fill();
+    ctx.stroke();
+  }
+}
+
+function drawScale(canvas, max) {
+  const ctx = canvas.getContext("2d");
+  const w = canvas.width;
+  const h = canvas.height;
+  ctx.clearRect(0, 0, w, h);
+  const top = 24;
+  const bottom = h - 12;
+  for (let y = top; y <= bottom; y++) {
+    ctx.fillStyle = rgb(colour(((bottom - y) / (bottom - top)) * max, max));
+    ctx.fillRect(8, y, 22, 1);
+  }
+  ctx.fillStyle = "#e6e9ee";
+  ctx.font = "12px sans-serif";
+  ctx.textAlign = "left";
+  ctx.textBaseline = "middle";
+  ctx.fillText("force, N", 4, 10);
+  for (let k = 0; k <= 5; k++) {
+    const y = bottom - (k / 5) * (bottom - top);
+    ctx.fillRect(30, y, 5, 1);
+    ctx.fillText(((k / 5) * max).toFixed(max >= 10 ? 0 : 1), 38, y);
+  }
+}
+
+function drawHistory(canvas, d) {
+  const ctx = canvas.getContext("2d");
+  const w = canvas.width;
+  const h = canvas.height;
+  ctx.clearRect(0, 0, w, h);
+  const l = 56;
+  const r = w - 64;
+  const t = 22;
+  const b = h - 24;
+  ctx.strokeStyle = "#444";
+  ctx.strokeRect(l, t, r - l, b - t);
+  const hist = d.history;
+  const tEnd = hist.length ? hist[hist.length - 1][0] : 0;
+  const fMax = Math.max(d.layout.scale_n[1], ...hist.map((p) => p[1] || 0));
+  const aMax = Math.max(1, ...hist.map((p) => p[2] || 0));
+  ctx.font = "12px sans-serif";
+  ctx.fillStyle = "#e6e9ee";
+  ctx.textBaseline = "middle";
+  ctx.textAlign = "left";
+  ctx.fillText("total force (N, left) and contact area (mm², right), last 30 s", l, 10);
+  ctx.textAlign = "right";
+  ctx.fillText(fMax.toFixed(1), l - 6, t);
+  ctx.fillText("0", l - 6, b);
+  ctx.textAlign = "left";
+  ctx.fillText(aMax.toFixed(0), r + 6, t);
+  ctx.fillText("0", r + 6, b);
+  ctx.textAlign = "center";
+  ctx.fillText("-30 s", l, b + 12);
+  ctx.fillText("now", r, b + 12);
+  const series = (idx, max, style) => {
+    ctx.strokeStyle = style;
+    ctx.lineWidth = 2;
+    ctx.beginPath();
+    hist.forEach((p, i) => {
+      const x = r - ((tEnd - p[0]) / HISTORY_S) * (r - l);
+      const y = b - ((p[idx] || 0) / max) * (b - t);
+      if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+    });
+    ctx.stroke();
+  };
+  series(1, fMax, "#f5a623");
+  series(2, aMax, "#5fb3ff");
+}
+
+function updateText(d, now) {
+  const f = d.frame;
+  const st = deviceState(d, now);
+  $("state").textContent = st;
+  $("state").className = `state ${st}`;
+  if (!f) return;
+  $("total-force").textContent = fmt(f.total_force_n, 3);
+  $("cop-x").textContent = f.cop_mm ? fmt(f.cop_mm[0], 2) : "–";
+  $("cop-y").textContent = f.cop_mm ? fmt(f.cop_mm[1], 2) : "–";
+  $("area").textContent = fmt(f.contact_area_mm2, 2);
+  $("in-contact").textContent = String(f.channels_in_contact);
+  $("peak").textContent = f.peak_channel ? `${f.peak_channel} ${fmt(f.peak_force_n, 3)} N` : "–";
+  $("health-up").textContent = f.up ? "up" : `not answering${f.error ? ": " + f.error : ""}`;
+  const p = d.polls;
+  const rate = p.length > 1 && p[p.length - 1][0] > p[0][0]
+    ? ((p[p.length - 1][1] - p[0][1]) * 1000) / (p[p.length - 1][0] - p[0][0]) : null;
+  $("poll-rate").textContent = fmt(rate, 1);
+  $("read-errors").textContent = String(f.read_errors_total);
+  const age = f.last_success_t === null ? null : f.t - f.last_success_t + (now - d.arrived) / 1000;
+  $("poll-age").textContent = fmt(age, 1);
+  $("seq").textContent = String(f.seq);
+}
+
+// ---------------------------------------------------------------- views
+function buildOverview() {
+  const cards = $("cards");
+  cards.replaceChildren();
+  for (const [name, d] of devices) {
+    const card = document.createElement("div");
+    card.className = "card";
+    card.dataset.device = name;
+    const title = document.createElement("h3");
+    title.textContent = name;
+    const canvas = document.createElement("canvas");
+    canvas.width = 200;
+    canvas.height = 200;
+    const info = document.createElement("p");
+    card.append(title, canvas, info);
+    card.addEventListener("click", () => { location.hash = `#device=${encodeURIComponent(name)}`; });
+    cards.append(card);
+    d.card = { canvas, info };
+  }
+}
+
+function route() {
+  const m = /^#device=(.+)$/.exec(location.hash);
+  const wanted = m ? decodeURIComponent(m[1]) : null;
+  if (wanted && devices.has(wanted)) selected = wanted;
+  else if (!wanted && location.hash !== "#overview" && devices.size === 1) selected = [...devices.keys()][0];
+  else selected = null;
+  $("overview").hidden = selected !== null;
+  $("detail").hidden = selected === null;
+  if (selected) {
+    $("dev-name").textContent = selected;
+    drawScale($("scale"), devices.get(selected).layout.scale_n[1]);
+  }
+  dirty = true;
+}
+
+function render() {
+  const now = performance.now();
+  if (dirty || now - lastDraw > 250) {
+    dirty = false;
+    lastDraw = now;
+    if (selected && devices.has(selected)) {
+      const d = devices.get(selected);
+      drawMap($("map"), d, { margin: 12, smooth: $("smooth").checked, trail: true });
+      drawHistory($("history"), d);
+      updateText(d, now);
+    } else {
+      for (const d of devices.values()) {
+        if (!d.card) continue;
+        drawMap(d.card.canvas, d, { margin: 6, smooth: false, trail: true });
+        const f = d.frame;
+        d.card.info.textContent = `${deviceState(d, now)} · ${f ? fmt(f.total_force_n, 2) : "–"} N`;
+      }
+    }
+  }
+  requestAnimationFrame(render);
+}
+
+function hover(ev) {
+  const tip = $("tooltip");
+  const d = selected && devices.get(selected);
+  if (!d || !d.frame) { tip.hidden = true; return; }
+  const canvas = $("map");
+  const rect = canvas.getBoundingClientRect();
+  const cx = ((ev.clientX - rect.left) * canvas.width) / rect.width;
+  const cy = ((ev.clientY - rect.top) * canvas.height) / rect.height;
+  const tr = transform(d.geo, canvas.width, canvas.height, 12);
+  const xm = tr.mx(cx);
+  const ym = tr.my(cy);
+  let best = -1;
+  let bestD = d.geo.pitch / 2;
+  d.layout.channels.forEach((c, k) => {
+    const dist = Math.max(Math.abs(c.x_mm - xm), Math.abs(c.y_mm - ym));
+    if (dist <= bestD) { bestD = dist; best = k; }
+  });
+  if (best < 0) { tip.hidden = true; return; }
+  const c = d.layout.channels[best];
+  const f = d.frame;
+  const status = d.layout.status_labels[f.status[best]] || "?";
+  const force = f.force_n[best];
+  tip.textContent = `${c.name} (${c.x_mm}, ${c.y_mm} mm): ${force === null ? "no value" : force.toFixed(3) + " N"}, ${status}`;
+  tip.style.left = `${ev.clientX - rect.left + 14}px`;
+  tip.style.top = `${ev.clientY - rect.top + 14}px`;
+  tip.hidden = false;
+}
+
+function main() {
+  $("nav-overview").addEventListener("click", (ev) => {
+    ev.preventDefault();
+    history.pushState(null, "", "#overview");
+    route();
+  });
+  window.addEventListener("hashchange", route);
+  $("map").addEventListener("mousemove", hover);
+  $("map").addEventListener("mouseleave", () => { $("tooltip").hidden = true; });
+  $("smooth").addEventListener("change", () => { dirty = true; });
+  loadDevices().then(connect, (err) => { $("conn").textContent = `cannot load devices: ${err.message}`; });
+  requestAnimationFrame(render);
+}
+
+document.addEventListener("DOMContentLoaded", main);

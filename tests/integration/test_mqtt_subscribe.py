@@ -1,0 +1,221 @@
+"""``tactile-gateway subscribe`` against a real Mosquitto (TLS, a password file): a gateway polling
+the simulated array publishes binary frames; the subscriber, a separate process, records them
+in the record format, and the record reads back with the values the gateway exported."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from broker import Broker, make_tls_files
+from netutil import free_port
+
+from gateway.analysis.records import read_record
+from gateway.config import load_config
+from gateway.mqtt.publisher import MqttPublisher
+from gateway.runtime.poller import Poller, SnapshotHolder
+from gateway.runtime.snapshot import STATUS_LABELS, GatewaySnapshot
+from sim_device import ArrayConfig, SimArray
+from sim_device.modbus_server import serve_tcp
+
+BIN = Path(sys.executable).parent
+PASSWORD = "s3cret-pw"
+WITH_VALUE = {"ok", "no_contact", "saturated"}
+
+
+@pytest.fixture(scope="module")
+def tls_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    return make_tls_files(tmp_path_factory.mktemp("tls"))
+
+
+@pytest.fixture
+def broker(tmp_path: Path, tls_files: dict[str, Path]) -> Iterator[Broker]:
+    b = Broker(tmp_path / "broker", users={"gw": PASSWORD, "reader": PASSWORD}, tls=tls_files)
+    b.start()
+    try:
+        yield b
+    finally:
+        b.stop()
+
+
+def _secret(path: Path, text: str) -> Path:
+    path.write_text(text + "\n")
+    path.chmod(0o600)
+    return path
+
+
+def _gateway_config(tmp_path: Path, sim_port: int, broker_port: int, ca: Path) -> Path:
+    secret = _secret(tmp_path / "gw.pw", PASSWORD)
+    path = tmp_path / "gateway.toml"
+    path.write_text(
+        f'[metrics]\naddress = "127.0.0.1:{free_port()}"\n\n'
+        f'[mqtt]\nhost = "127.0.0.1"\nport = {broker_port}\nusername = "gw"\npassword_file = "{secret}"\n'
+        f'gateway = "gw1"\ntopic_prefix = "lab/tactile"\nencoding = "binary"\n'
+        f'tls = {{ ca_file = "{ca}" }}\n\n'
+        f'[[bus]]\nname = "sim"\nkind = "tcp"\nhost = "127.0.0.1"\nport = {sim_port}\n'
+        "poll_interval_s = 0.05\n\n"
+        '[[bus.device]]\nname = "arr"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 4\ncolumns = 2\n'
+    )
+    path.chmod(0o600)
+    return path
+
+
+def _subscribe_cmd(
+    broker: Broker, tmp_path: Path, ca: Path, *extra: str, password: str = PASSWORD
+) -> list[str]:
+    secret = _secret(tmp_path / f"reader-{password}.pw", password)
+    return [
+        str(BIN / "tactile-gateway"), "subscribe", "--broker", f"127.0.0.1:{broker.port}",
+        "--tls-ca", str(ca), "--username", "reader", "--password-file", str(secret),
+        "--prefix", "lab/tactile", *extra,
+    ]  # fmt: skip
+
+
+async def until(cond: Callable[[], bool], timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        if time.monotonic() > deadline:
+            return False
+        await asyncio.sleep(0.02)
+    return True
+
+
+class Exported:
+    """The gateway's own snapshots of the device, numbered as the publisher numbers frames."""
+
+    def __init__(self) -> None:
+        self.by_seq: dict[int, Any] = {}
+        self._last: object = None
+
+    def __call__(self, snapshot: GatewaySnapshot) -> None:
+        dev = snapshot.devices.get("arr")
+        if dev is not None and dev is not self._last:
+            self._last = dev
+            self.by_seq[len(self.by_seq) + 1] = dev
+
+
+def _expected_rows(snap: Any) -> dict[str, float]:
+    """What the record format allows for one poll: resistance per channel (float32, as the
+    binary frame carries it), ``inf`` for an open channel, nothing for the rest."""
+    out: dict[str, float] = {}
+    for k, name in enumerate(snap.channel_names):
+        status = STATUS_LABELS[int(snap.status[k])]
+        r = float(np.float32(snap.resistance_ohm[k]))
+        if status == "open" or (status in WITH_VALUE and not math.isfinite(r)):
+            out[name] = math.inf
+        elif status in WITH_VALUE and r > 0.0:
+            out[name] = r
+    return out
+
+
+async def test_subscribe_records_50_binary_frames_that_read_back_as_published(
+    tmp_path: Path, broker: Broker, tls_files: dict[str, Path]
+) -> None:
+    ca = tls_files["ca.crt"]
+    array = SimArray(ArrayConfig(channels=4, columns=2, scenario="indentation", speed=5.0, seed=2))
+    out = tmp_path / "rec.csv"
+    async with serve_tcp([array], host="127.0.0.1", port=0) as server:
+        config = load_config(_gateway_config(tmp_path, server.port, broker.port, ca))
+        holder = SnapshotHolder()
+        exported = Exported()
+        holder.subscribe(exported)
+        publisher = MqttPublisher(config)
+        holder.subscribe(publisher.on_snapshot)
+        publisher.start()
+        try:
+            async with Poller(config, holder):
+                # the retained meta message is on the broker before the subscriber comes
+                assert await until(lambda: publisher.stats().published.get("arr", 0) >= 5, 20.0)
+                cmd = _subscribe_cmd(
+                    broker, tmp_path, ca, "--gateway", "gw1", "--device", "arr",
+                    "--out", str(out), "--count", "50", "--json",
+                )  # fmt: skip
+                proc = await asyncio.create_subprocess_exec(
+                    *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE
+                )
+                try:
+                    stdout, stderr = await asyncio.wait_for(proc.communicate(), 60.0)
+                except TimeoutError:
+                    proc.kill()
+                    await proc.wait()
+                    raise
+        finally:
+            publisher.stop()
+    assert proc.returncode == 0, stderr.decode()
+    frames = [json.loads(line) for line in stdout.decode().splitlines()]
+    assert len(frames) == 50
+    seqs = [f["sequence"] for f in frames]
+    assert seqs == list(range(seqs[0], seqs[0] + 50)), "50 consecutive frames, in order"
+    assert "0 missing in 0 gap(s)" in stderr.decode() and "Traceback" not in stderr.decode()
+    assert {f["gateway"] for f in frames} == {"gw1"} and {f["device"] for f in frames} == {"arr"}
+    assert frames[0]["channels"] == ["ch00", "ch01", "ch02", "ch03"], "names from the retained meta"
+
+    record = read_record(out)
+    assert record.metadata["source"] == "tactile-gateway subscribe"
+    assert "force_n" not in out.read_text().splitlines()[len(record.metadata)], "no reference force"
+    assert sum(c.n_samples for c in record.channels.values()) >= 150, "rows for (nearly) every channel"
+    snaps = [exported.by_seq[s] for s in seqs]
+    t0 = snaps[0].device_time_s
+    assert t0 is not None, "the simulated array has a device clock"
+    for name in ["ch00", "ch01", "ch02", "ch03"]:
+        rows = [
+            (round(s.device_time_s - t0, 6), _expected_rows(s)[name])
+            for s in snaps
+            if name in _expected_rows(s)
+        ]
+        ch = record.channel(name) if rows else None
+        if ch is None:
+            assert name not in record.channels
+            continue
+        assert ch.n_samples == len(rows)
+        np.testing.assert_allclose(ch.time_s, [t for t, _ in rows], rtol=0, atol=1e-6)
+        assert ch.resistance_ohm.tolist() == [r for _, r in rows], name
+        # the frame's own values agree with the gateway's export at the same sequence number
+    for f, s in zip(frames, snaps, strict=True):
+        assert f["device_time_s"] == s.device_time_s
+        assert f["total_force_n"] == pytest.approx(s.total_force_n)
+        assert f["force_n"] == pytest.approx(
+            [None if not np.isfinite(v) else float(np.float32(v)) for v in s.force_n], rel=1e-6
+        )
+
+
+def _run(cmd: list[str], timeout: float = 30.0) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=False)
+
+
+def test_wrong_password_untrusted_ca_and_refused_connection_are_one_line_errors(
+    tmp_path: Path, broker: Broker, tls_files: dict[str, Path]
+) -> None:
+    cases = [
+        (_subscribe_cmd(broker, tmp_path, tls_files["ca.crt"], "--count", "1", password="wrong"),
+         ("Not authorized", "Bad user name or password")),
+        (_subscribe_cmd(broker, tmp_path, tls_files["other.crt"], "--count", "1"),
+         ("certificate verify failed",)),
+        ([str(BIN / "tactile-gateway"), "subscribe", "--broker", f"127.0.0.1:{free_port()}", "--count", "1"],
+         ("connection refused",)),
+    ]  # fmt: skip
+    for cmd, expected in cases:
+        result = _run(cmd)
+        lines = result.stderr.strip().splitlines()
+        assert result.returncode == 1, result
+        assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+        assert any(e in lines[0] for e in expected), lines[0]
+        assert result.stdout == ""
+
+
+def test_a_password_file_others_can_read_is_refused(
+    tmp_path: Path, broker: Broker, tls_files: dict[str, Path]
+) -> None:
+    cmd = _subscribe_cmd(broker, tmp_path, tls_files["ca.crt"], "--count", "1")
+    (tmp_path / f"reader-{PASSWORD}.pw").chmod(0o644)
+    result = _run(cmd)
+    assert result.returncode == 1 and "chmod 600" in result.stderr and "Traceback" not in result.stderr

@@ -1,0 +1,183 @@
+"""The live pressure-map page in a real browser (Debian chromium, headless, via Playwright)
+against the simulated array: it loads without console errors, its map follows the probe,
+its centre-of-pressure readout follows the load within a pitch, the device turns stale
+within 2 s of the simulator stopping and comes back when it restarts; with basic auth the
+page and its streams refuse a request without credentials. Writes a screenshot."""
+
+from __future__ import annotations
+
+import base64
+import os
+import shutil
+import urllib.error
+import urllib.request
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import bcrypt
+import pytest
+from web_fixtures import (
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    PITCH_MM,
+    Gateway,
+    gateway_with_page,
+    true_cop,
+    until_async,
+)
+
+from gateway.metrics.web_config import load_web_config
+
+#: the map's pixels as a coarse grid of mean luminance (16 x 16 cells)
+MAP_CELLS_JS = """() => {
+  const c = document.getElementById("map");
+  const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+  const n = 16, out = new Array(n * n).fill(0), cw = c.width / n, ch = c.height / n;
+  for (let y = 0; y < c.height; y += 2) for (let x = 0; x < c.width; x += 2) {
+    const o = 4 * (y * c.width + x);
+    out[Math.floor(y / ch) * n + Math.floor(x / cw)] += d[o] + d[o + 1] + d[o + 2];
+  }
+  return out.map((v) => v / (cw * ch / 4) / 3);
+}"""
+
+
+@pytest.fixture
+async def browser() -> AsyncIterator[Any]:
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as pw:
+        b = await pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        try:
+            yield b
+        finally:
+            await b.close()
+
+
+async def text(page: Any, selector: str) -> str:
+    return str(await page.text_content(selector))
+
+
+async def cop_readout(page: Any) -> tuple[float, float] | None:
+    x, y = await text(page, "#cop-x"), await text(page, "#cop-y")
+    try:
+        return float(x), float(y)
+    except ValueError:
+        return None
+
+
+async def follow_cop(page: Any, gw: Gateway, x_range: tuple[float, float]) -> tuple[float, float]:
+    """Wait for the page's centre of pressure to lie in ``x_range``; check it against the
+    simulator's true centre of pressure there (within a pitch)."""
+    seen: dict[str, tuple[float, float] | None] = {}
+
+    async def there() -> bool:
+        seen["page"] = cop = await cop_readout(page)
+        seen["true"] = true_cop(gw.array)
+        return cop is not None and seen["true"] is not None and x_range[0] <= cop[0] <= x_range[1]
+
+    await until_async(there, 20, f"the centre of pressure at x in {x_range} mm")
+    page_cop, sim_cop = seen["page"], seen["true"]
+    assert page_cop is not None and sim_cop is not None
+    assert abs(page_cop[0] - sim_cop[0]) < PITCH_MM and abs(page_cop[1] - sim_cop[1]) < PITCH_MM, (
+        page_cop, sim_cop)  # fmt: skip
+    return page_cop
+
+
+async def test_the_page_shows_the_array_live(browser: Any, tmp_path: Path) -> None:
+    async with gateway_with_page() as gw:
+        page = await browser.new_page(viewport={"width": 1280, "height": 900})
+        errors: list[str] = []
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        resp = await page.goto(gw.server.base_url + "/")
+        assert resp is not None and resp.status == 200
+        assert "script-src 'self'" in (resp.headers.get("content-security-policy") or "")
+        await until_async(lambda: _is(page, "#state", "up"), 10, "the device shown as up")
+        assert await text(page, "#dev-name") == "arr"
+
+        # the probe slides from left to right along the middle row: the map follows it
+        left = await follow_cop(page, gw, (-1.0, 2.5))
+        pixels_left = await page.evaluate(MAP_CELLS_JS)
+        right = await follow_cop(page, gw, (5.0, 9.0))
+        pixels_right = await page.evaluate(MAP_CELLS_JS)
+        assert right[0] - left[0] > PITCH_MM
+        changed = sum(abs(a - b) > 8 for a, b in zip(pixels_left, pixels_right, strict=True))
+        assert changed >= 16, f"only {changed} of 256 map cells changed as the probe moved"
+        assert float(await text(page, "#total-force")) > 0.1
+        assert float(await text(page, "#poll-rate")) > 5
+        shot = tmp_path / "pressure-map.png"
+        await page.screenshot(path=str(shot))
+        assert shot.stat().st_size > 10_000
+        if target := os.environ.get("TACTILE_SCREENSHOT"):
+            shutil.copyfile(shot, target)
+
+        # the hover shows a channel's value
+        box = await page.locator("#map").bounding_box()
+        await page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        tip = await text(page, "#tooltip")
+        assert tip.startswith("ch") and (" N, " in tip or "no value" in tip), tip
+
+        # the simulator stops: stale within 2 s; it restarts: up again
+        await gw.stop_sim()
+        waited = await until_async(lambda: _is(page, "#state", "stale"), 2.0, "the device shown as stale")
+        assert await page.locator("#map").is_visible()
+        await gw.start_sim()
+        await until_async(lambda: _is(page, "#state", "up"), 10, "the device shown as up again")
+        await page.close()
+        assert waited <= 2.0
+    assert errors == [], errors
+
+
+async def _is(page: Any, selector: str, value: str) -> bool:
+    return await text(page, selector) == value
+
+
+def _status(url: str, auth: tuple[str, str] | None = None) -> int:
+    req = urllib.request.Request(url)
+    if auth is not None:
+        req.add_header("Authorization", "Basic " + base64.b64encode(f"{auth[0]}:{auth[1]}".encode()).decode())
+    try:
+        with urllib.request.urlopen(req, timeout=10) as resp:
+            return int(resp.status)
+    except urllib.error.HTTPError as exc:
+        exc.close()
+        return int(exc.code)
+
+
+async def test_basic_auth_guards_the_page_and_the_streams(browser: Any, tmp_path: Path) -> None:
+    hashed = bcrypt.hashpw(b"correct horse", bcrypt.gensalt(rounds=4)).decode()
+    web = tmp_path / "web.yml"
+    web.write_text(f"basic_auth_users:\n  viewer: '{hashed}'\n")
+    async with gateway_with_page(load_web_config(web)) as gw:
+        base = gw.server.base_url
+        paths = ["/", "/static/app.js", "/api/devices", "/api/devices/arr/frame", "/api/devices/arr/stream",
+                 "/api/live", "/metrics"]  # fmt: skip
+        for path in paths:
+            assert await _to_thread(_status, base + path) == 401, path
+            assert await _to_thread(_status, base + path, ("viewer", "wrong")) == 401, path
+        for path in paths[:4]:
+            assert await _to_thread(_status, base + path, ("viewer", "correct horse")) == 200, path
+        # a browser without credentials is refused; with them the page runs
+        from playwright.async_api import Error as PlaywrightError
+
+        anonymous = await browser.new_context()
+        with pytest.raises(PlaywrightError, match="ERR_INVALID_AUTH_CREDENTIALS"):
+            await (await anonymous.new_page()).goto(base + "/")
+        await anonymous.close()
+        context = await browser.new_context(
+            http_credentials={"username": "viewer", "password": "correct horse"}
+        )
+        page = await context.new_page()
+        errors: list[str] = []
+        page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        await page.goto(base + "/")
+        await until_async(lambda: _is(page, "#state", "up"), 10, "the device shown as up with credentials")
+        await context.close()
+    assert errors == [], errors
+
+
+async def _to_thread(fn: Any, *args: Any) -> Any:
+    import asyncio
+
+    return await asyncio.to_thread(fn, *args)

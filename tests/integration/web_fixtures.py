@@ -1,0 +1,120 @@
+"""A gateway with its page, polling a simulated array in-process, and a headless Debian
+chromium driven by Playwright (nothing is downloaded: the system browser is used)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import shutil
+import time
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from prometheus_client import CollectorRegistry
+from test_gateway_tcp import array_device
+
+from gateway.config import bus_config_for, gateway_config_for
+from gateway.metrics.collector import make_registry
+from gateway.metrics.server import MetricsServer
+from gateway.metrics.web_config import WebConfig
+from gateway.runtime.poller import Poller, SnapshotHolder
+from gateway.web import FrameHub, WebPage
+from sim_device import ArrayConfig, SimArray, serve_tcp
+
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync", "--no-first-run",
+]  # fmt: skip
+PITCH_MM = 2.5
+COLUMNS = 4
+
+
+async def until(cond: Callable[[], object], timeout_s: float, what: str, step_s: float = 0.05) -> float:
+    """Wait for ``cond()`` to be truthy; fail naming ``what`` after ``timeout_s``. Returns the wait."""
+    t0 = time.monotonic()
+    while True:
+        if cond():
+            return time.monotonic() - t0
+        if time.monotonic() - t0 > timeout_s:
+            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
+        await asyncio.sleep(step_s)
+
+
+async def until_async(cond: Callable[[], object], timeout_s: float, what: str, step_s: float = 0.05) -> float:
+    """``until`` for a coroutine condition."""
+    t0 = time.monotonic()
+    while True:
+        if await cond():  # type: ignore[misc]
+            return time.monotonic() - t0
+        if time.monotonic() - t0 > timeout_s:
+            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
+        await asyncio.sleep(step_s)
+
+
+def indentation_array(speed: float = 3.0) -> SimArray:
+    cfg = ArrayConfig(
+        channels=16, columns=COLUMNS, pitch_mm=PITCH_MM, seed=1, scenario="indentation", speed=speed
+    )
+    return SimArray(cfg, device_id=1)
+
+
+def true_cop(array: SimArray) -> tuple[float, float] | None:
+    """The centre of the simulator's true forces, at the gateway's channel positions (mm)."""
+    f = np.asarray(array.true_force_n(), dtype=np.float64)
+    total = float(f.sum())
+    if total <= 0.05:
+        return None
+    idx = np.arange(len(f))
+    return float(np.dot(f, (idx % COLUMNS) * PITCH_MM) / total), float(
+        np.dot(f, (idx // COLUMNS) * PITCH_MM) / total
+    )
+
+
+@dataclass
+class Gateway:
+    array: SimArray
+    server: MetricsServer
+    holder: SnapshotHolder
+    hub: FrameHub
+    sim_port: int
+    sim: contextlib.AsyncExitStack
+
+    async def stop_sim(self) -> None:
+        await self.sim.aclose()
+
+    async def start_sim(self) -> None:
+        """Serve the array (again: on the same port once it has one)."""
+        self.sim = contextlib.AsyncExitStack()
+        served = await self.sim.enter_async_context(
+            serve_tcp([self.array], host="127.0.0.1", port=self.sim_port)
+        )
+        self.sim_port = served.port
+
+
+@contextlib.asynccontextmanager
+async def gateway_with_page(
+    web_config: WebConfig | None = None, speed: float = 3.0, scale_max_n: float = 1.0
+) -> AsyncIterator[Gateway]:
+    """The simulated array served over loopback Modbus TCP, polled at 20 Hz, and the server
+    with the page on an ephemeral port; the simulator can be stopped and restarted."""
+    holder = SnapshotHolder()
+    registry = make_registry(holder.get, CollectorRegistry())
+    hub = FrameHub(holder)
+    server = MetricsServer(
+        registry, "127.0.0.1", 0, web_config, WebPage(hub, scale_max_n=scale_max_n).install
+    )
+    gw = Gateway(indentation_array(speed), server, holder, hub, 0, contextlib.AsyncExitStack())
+    try:
+        await gw.start_sim()
+        device = array_device(gw.array, "arr", bench=False)
+        bus = bus_config_for("sim", "tcp", [device], host="127.0.0.1", port=gw.sim_port,
+                             poll_interval_s=0.05, timeout_s=0.3, backoff_max_s=0.3)  # fmt: skip
+        with server:
+            async with Poller(gateway_config_for([bus]), holder):
+                yield gw
+    finally:
+        await gw.sim.aclose()
+        server.stop()

@@ -1,0 +1,144 @@
+"""Frame payloads: JSON and the binary layout, round trips from hand-built snapshots, the
+documented byte offsets, absent values, and bytes that are not a frame."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from gateway.mqtt.payload import (
+    BINARY_MAGIC,
+    FrameDecodeError,
+    decode_binary,
+    encode_binary,
+    encode_json,
+    frame_dict,
+)
+from gateway.runtime.snapshot import STATUS_LABELS, ChannelStatus, DeviceSnapshot
+
+NAMES = ("a0", "a1", "b0", "b1")
+
+
+def snapshot(**changes: object) -> DeviceSnapshot:
+    fields: dict[str, object] = {
+        "device": "arr",
+        "bus": "sim",
+        "channel_index": np.arange(4),
+        "channel_names": NAMES,
+        "x_mm": np.array([0.0, 2.5, 0.0, 2.5]),
+        "y_mm": np.array([0.0, 0.0, 2.5, 2.5]),
+        "resistance_ohm": np.array([1500.0, math.inf, 0.0, math.nan]),
+        "force_n": np.array([1.25, math.nan, math.nan, 0.0]),
+        "static_estimate": None,
+        "reference_force_n": np.full(4, math.nan),
+        "status": np.array(
+            [ChannelStatus.OK, ChannelStatus.OPEN, ChannelStatus.SHORT, ChannelStatus.NO_CONTACT],
+            dtype=np.int8,
+        ),
+        "up": True,
+        "timestamp_s": 1_700_000_000.125,
+        "last_success_timestamp_s": 1_700_000_000.125,
+        "device_time_s": 12.5,
+        "poll_interval_s": 0.05,
+        "total_force_n": 1.25,
+        "center_of_pressure_mm": (0.0, 0.0),
+        "channels_in_contact": 1,
+        "contact_area_mm2": 6.25,
+    }
+    fields.update(changes)
+    return DeviceSnapshot(**fields)  # type: ignore[arg-type]
+
+
+def test_frame_dict_is_json_ready_with_none_for_absent_values() -> None:
+    frame = frame_dict(snapshot(), 7)
+    assert frame["sequence"] == 7 and frame["device"] == "arr" and frame["channels"] == list(NAMES)
+    assert frame["force_n"] == [1.25, None, None, 0.0]
+    assert frame["resistance_ohm"] == [1500.0, None, 0.0, None], "inf and NaN are both absent"
+    assert frame["force_static_n"] == [None] * 4, "no static estimate"
+    assert frame["status"] == ["ok", "open", "short", "no_contact"]
+    assert frame["center_of_pressure_mm"] == [0.0, 0.0] and frame["device_time_s"] == 12.5
+    back = json.loads(encode_json(frame))
+    assert back == frame
+    assert b"NaN" not in encode_json(frame) and b"Infinity" not in encode_json(frame)
+
+
+def test_json_frame_without_device_clock_or_contact() -> None:
+    frame = frame_dict(snapshot(device_time_s=None, center_of_pressure_mm=None), 1)
+    back = json.loads(encode_json(frame))
+    assert back["device_time_s"] is None and back["center_of_pressure_mm"] is None
+
+
+def test_binary_layout_matches_the_documented_offsets() -> None:
+    frame = frame_dict(snapshot(), 0x0102030405)
+    data = encode_binary(frame)
+    n = 4
+    assert len(data) == 64 + n * 13
+    assert data[0:4] == BINARY_MAGIC == b"TGF1"
+    assert struct.unpack_from("<Q", data, 4)[0] == 0x0102030405
+    assert struct.unpack_from("<d", data, 12)[0] == 1_700_000_000.125
+    assert struct.unpack_from("<d", data, 20)[0] == 12.5
+    assert struct.unpack_from("<d", data, 28)[0] == 1.25
+    assert struct.unpack_from("<dd", data, 36) == (0.0, 0.0)
+    assert struct.unpack_from("<d", data, 52)[0] == 6.25
+    assert struct.unpack_from("<HH", data, 60) == (1, n)
+    force = np.frombuffer(data, "<f4", n, 64)
+    static = np.frombuffer(data, "<f4", n, 64 + 4 * n)
+    resistance = np.frombuffer(data, "<f4", n, 64 + 8 * n)
+    status = np.frombuffer(data, np.uint8, n, 64 + 12 * n)
+    assert force[0] == np.float32(1.25) and np.isnan(force[1]) and force[3] == 0.0
+    assert np.isnan(static).all()
+    assert resistance[0] == 1500.0 and np.isnan(resistance[1]) and resistance[2] == 0.0
+    assert [STATUS_LABELS[s] for s in status] == ["ok", "open", "short", "no_contact"]
+
+
+def test_binary_round_trip_to_float32_precision() -> None:
+    snap = snapshot(
+        resistance_ohm=np.array([1234.5678, 2.0e6, 0.1, 99.0]),
+        force_n=np.array([0.123456789, 3.3, math.nan, 0.0]),
+    )
+    frame = frame_dict(snap, 42)
+    back = decode_binary(encode_binary(frame), "arr", list(NAMES))
+    for key in ("sequence", "device", "host_time_s", "device_time_s", "up", "total_force_n"):
+        assert back[key] == frame[key], key
+    assert back["center_of_pressure_mm"] == frame["center_of_pressure_mm"]
+    assert back["channels"] == list(NAMES) and back["status"] == frame["status"]
+    assert back["channels_in_contact"] == 1 and back["contact_area_mm2"] == 6.25
+    for key in ("force_n", "force_static_n", "resistance_ohm"):
+        want = [None if v is None else float(np.float32(v)) for v in frame[key]]
+        assert back[key] == want, key
+
+
+def test_binary_absent_clock_and_centre_and_default_channel_names() -> None:
+    frame = frame_dict(snapshot(device_time_s=None, center_of_pressure_mm=None), 3)
+    back = decode_binary(encode_binary(frame))
+    assert back["device_time_s"] is None and back["center_of_pressure_mm"] is None
+    assert back["channels"] == ["0", "1", "2", "3"] and back["device"] == ""
+
+
+def test_a_stale_channel_makes_a_binary_frame_down() -> None:
+    status = np.full(4, int(ChannelStatus.STALE), dtype=np.int8)
+    frame = frame_dict(snapshot(status=status, up=False), 9)
+    assert decode_binary(encode_binary(frame))["up"] is False
+
+
+@pytest.mark.parametrize(
+    ("mutate", "fragment"),
+    [
+        (lambda d: d[:10], "at least 64 bytes"),
+        (lambda d: b"XXXX" + d[4:], "magic"),
+        (lambda d: d[:-1], "has 116 bytes, got 115"),
+        (lambda d: d + b"\0", "got 117"),
+        (lambda d: d[:-1] + bytes([len(STATUS_LABELS)]), "status code out of range"),
+        (lambda d: b"", "got 0"),
+    ],
+    ids=["short", "bad-magic", "truncated", "trailing", "status", "empty"],
+)
+def test_bytes_that_are_not_a_frame_are_refused(mutate: Callable[[bytes], bytes], fragment: str) -> None:
+    data = encode_binary(frame_dict(snapshot(), 1))
+    with pytest.raises(FrameDecodeError, match=fragment):
+        decode_binary(mutate(data))

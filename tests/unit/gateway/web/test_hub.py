@@ -1,0 +1,144 @@
+"""The hub's fan-out, driven by hand: every poll numbered, streams bounded with drops counted
+and visible as gaps, pages newest-frame-wins at a capped rate; no clock, no sleep."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+
+import pytest
+from web_snapshots import device, gateway
+
+from gateway.runtime.poller import SnapshotHolder
+from gateway.web.hub import FrameHub, PageQueue, StreamQueue
+
+
+class Scheduled:
+    """Stands in for ``loop.call_soon_threadsafe``: collects callbacks, runs them on demand."""
+
+    def __init__(self) -> None:
+        self.calls: list[Callable[[], None]] = []
+
+    def __call__(self, fn: Callable[[], None]) -> None:
+        self.calls.append(fn)
+
+    def run(self) -> None:
+        calls, self.calls = self.calls, []
+        for fn in calls:
+            fn()
+
+
+def seqs(q: StreamQueue) -> list[int]:
+    return [s for s, _ in q.take()]
+
+
+def test_stream_queue_drops_the_oldest_and_counts() -> None:
+    woken: list[int] = []
+    q = StreamQueue("arr", capacity=3, wakeup=lambda: woken.append(1))
+    lost = [q.offer(s, b"{}") for s in range(1, 6)]
+    assert lost == [0, 0, 0, 1, 1] and q.dropped == 2 and len(woken) == 5
+    assert seqs(q) == [3, 4, 5]
+    # a gap in the offered sequence counts as dropped too
+    assert q.offer(9, b"{}") == 3 and q.dropped == 5
+    assert seqs(q) == [9]
+    with pytest.raises(ValueError):
+        StreamQueue("arr", capacity=0)
+
+
+def test_page_queue_newest_frame_wins_at_the_capped_rate() -> None:
+    p = PageQueue(None, max_fps=10.0)
+    assert p.wait_s(0.0) is None
+    p.offer("a", b"1")
+    assert p.wait_s(0.0) == 0.0
+    assert p.take(0.0) == [b"1"]
+    for k in range(100):  # a stalled browser: 100 polls of one device arrive
+        p.offer("a", b"%d" % k)
+    p.offer("b", b"x")
+    assert p.superseded == 99
+    assert p.wait_s(0.04) == pytest.approx(0.06)  # 10 frames/s: not before 0.1 s
+    assert p.take(0.1) == [b"99", b"x"]  # one frame per device, the newest
+    assert p.wait_s(0.1) is None
+
+
+def test_page_queue_filters_devices() -> None:
+    p = PageQueue(frozenset({"b"}), max_fps=30.0)
+    p.offer("a", b"1")
+    assert p.wait_s(0.0) is None
+    p.offer("b", b"2")
+    assert p.take(0.0) == [b"2"]
+
+
+def test_hub_numbers_each_device_poll_and_wakes_once_per_batch() -> None:
+    holder = SnapshotHolder()
+    hub = FrameHub(holder)
+    sched = Scheduled()
+    hub.attach(sched)
+    a, b = device("a"), device("b")
+    holder.publish(gateway(a, b))
+    holder.publish(gateway(a, b))  # nothing new: no frame
+    a2 = device("a", t=1001.0)
+    holder.publish(gateway(a2, b))
+    assert len(sched.calls) == 1  # one wake for the whole batch
+    stream = hub.open_stream("a")
+    page = hub.open_page(None, 30.0)
+    sched.run()
+    assert seqs(stream) == [1, 2]
+    latest = hub.latest("a")
+    assert latest is not None and latest.seq == 2 and latest.snapshot is a2
+    frames = [json.loads(f) for f in page.take(0.0)]
+    assert {(f["device"], f["seq"]) for f in frames} == {("a", 2), ("b", 1)}
+
+
+def test_a_slow_stream_client_sees_a_gap_and_the_hub_counts_its_drops() -> None:
+    hub = FrameHub(stream_capacity=4)
+    sched = Scheduled()
+    hub.attach(sched)
+    slow, fast = hub.open_stream("a"), hub.open_stream("a")
+    got_fast: list[int] = []
+    for k in range(10):
+        hub.on_snapshot(gateway(device("a", t=float(k))))
+        sched.run()
+        got_fast += seqs(fast)
+    assert got_fast == list(range(1, 11))
+    got_slow = seqs(slow)
+    assert got_slow == [7, 8, 9, 10] and slow.dropped == 6
+    assert hub.dropped_total == {"a": 6}
+    data = [json.loads(f) for f in hub.open_page(None, 30.0).take(0.0)]
+    assert data == []  # a page opened later gets only what comes after
+
+
+def test_an_overflowing_inbox_shows_as_a_gap() -> None:
+    hub = FrameHub(inbox_capacity=3)
+    sched = Scheduled()
+    hub.attach(sched)
+    q = hub.open_stream("a")
+    for k in range(8):  # the server loop is busy: 8 polls, one drain
+        hub.on_snapshot(gateway(device("a", t=float(k))))
+    sched.run()
+    assert seqs(q) == [6, 7, 8] and q.dropped == 5 and hub.inbox_dropped == 5
+
+
+def test_a_detached_hub_keeps_the_latest_and_queues_nothing() -> None:
+    hub = FrameHub()
+    hub.on_snapshot(gateway(device("a")))
+    hub.on_snapshot(gateway(device("a", t=2.0)))
+    latest = hub.latest("a")
+    assert latest is not None and latest.seq == 2
+    sched = Scheduled()
+    hub.attach(sched)
+    assert sched.calls == []
+    hub.on_snapshot(gateway(device("b")))  # "a" is gone from the gateway
+    assert hub.latest("a") is None and [e.snapshot.device for e in hub.devices()] == ["b"]
+    hub.detach()
+    hub.on_snapshot(gateway(device("b", t=3.0)))
+    assert len(sched.calls) == 1
+
+
+def test_closing_ends_every_client() -> None:
+    hub = FrameHub()
+    woken: list[str] = []
+    s = hub.open_stream("a", lambda: woken.append("s"))
+    p = hub.open_page(None, 30.0, lambda: woken.append("p"))
+    assert hub.clients() == (1, 1)
+    hub.close_all()
+    assert s.closed and p.closed and sorted(woken) == ["p", "s"] and hub.clients() == (0, 0)
