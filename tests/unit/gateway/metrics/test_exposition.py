@@ -1,0 +1,97 @@
+"""The directly written exposition equals, byte for byte, what the client library makes of the
+collector, for snapshots with every kind of value, and ``promtool`` accepts it."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from prometheus_client import CollectorRegistry, generate_latest
+
+from gateway.config import device_config_for
+from gateway.metrics.collector import make_registry
+from gateway.metrics.exposition import SnapshotExposition, render
+from gateway.modbus.image import RawSample
+from gateway.model import SensorParams
+from gateway.runtime.counters import Tally
+from gateway.runtime.processor import DeviceProcessor
+from gateway.runtime.snapshot import GatewaySnapshot
+
+
+def _reference(snap: GatewaySnapshot) -> bytes:
+    return generate_latest(make_registry(lambda: snap, CollectorRegistry(auto_describe=False)))
+
+
+def _snapshot(seed: int, n_devices: int, names: list[str]) -> GatewaySnapshot:
+    rng = np.random.default_rng(seed)
+    devices = {}
+    counters = {}
+    for d in range(n_devices):
+        n = int(rng.integers(1, 9))
+        dev = device_config_for(names[d % len(names)] + str(d), 1, [SensorParams()] * n, min(3, n), 2.5)
+        proc = DeviceProcessor(dev, "bus", 0.05)
+        counts = rng.integers(0, 65536, n).astype(np.uint16)  # rails included: open, short
+        reference = np.where(rng.random(n) < 0.5, rng.normal(2.0, 1.0, n), np.nan)
+        raw = RawSample(
+            counts=counts,
+            device_time_s=float(rng.random() * 100) if rng.random() < 0.5 else None,
+            reference_force_n=reference,
+        )
+        snap, state = proc.process(proc.initial_state(), raw, 1.7e9 + d, float(d))
+        if rng.random() < 0.3:
+            snap, _ = proc.stale(state, 1.7e9 + d + 1, "timeout")
+        devices[dev.name] = snap
+        if rng.random() < 0.8:
+            tally = Tally()
+            for _ in range(int(rng.integers(0, 5))):
+                tally.read()
+                tally.poll(float(rng.random() * 0.01))
+            tally.error("timeout")
+            counters[dev.name] = tally.freeze()
+    return GatewaySnapshot.build(devices, counters, seed)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_devices=st.integers(0, 4),
+    names=st.lists(st.from_regex(r"[a-z0-9_-]{1,8}", fullmatch=True), min_size=1, max_size=3),
+)
+def test_the_bytes_equal_the_client_library_s(seed: int, n_devices: int, names: list[str]) -> None:
+    snap = _snapshot(seed, n_devices, names)
+    assert render(snap).encode() == _reference(snap)
+
+
+def test_an_empty_gateway_and_the_cache() -> None:
+    snap = GatewaySnapshot()
+    assert render(snap).encode() == _reference(snap)
+    calls = []
+
+    def source() -> GatewaySnapshot:
+        calls.append(1)
+        return current
+
+    current = _snapshot(1, 2, ["a"])
+    exposition = SnapshotExposition(source)
+    first = exposition()
+    assert exposition() is first  # the same snapshot: the cached bytes
+    current = _snapshot(2, 2, ["a"])
+    assert exposition() is not first and exposition() == _reference(current)
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_promtool_accepts_it(tmp_path: Path, seed: int) -> None:
+    promtool = shutil.which("promtool")
+    assert promtool is not None, "promtool (Debian prometheus) is installed by the Makefile"
+    path = tmp_path / "metrics.txt"
+    path.write_text(render(_snapshot(seed, 3, ["arr"])))
+    with path.open("rb") as f:
+        result = subprocess.run(
+            [promtool, "check", "metrics"], stdin=f, capture_output=True, text=True, timeout=60
+        )
+    assert result.returncode == 0, result.stdout + result.stderr
