@@ -19,7 +19,6 @@ import threading
 from collections.abc import Callable
 from functools import lru_cache
 
-from prometheus_client.openmetrics.exposition import _escape  # type: ignore[attr-defined]
 from prometheus_client.utils import floatToGoString
 
 from ..runtime.counters import READ_ERROR_REASONS
@@ -28,11 +27,9 @@ from .collector import SnapshotCollector
 
 __all__ = ["SnapshotExposition"]
 
-_ESCAPE_ALLOW_UTF8 = "allow-utf-8"
-
-
 def _label(value: str) -> str:
-    return str(_escape(value, _ESCAPE_ALLOW_UTF8, False))
+    """A label value escaped as the text format wants it: backslash, newline, double quote."""
+    return value.replace("\\", "\\\\").replace("\n", "\\n").replace('"', '\\"')
 
 
 @lru_cache(maxsize=1)
@@ -154,10 +151,9 @@ def _device_lines(
     for name, dev in zip(names, devices, strict=True):
         d = f'device="{_label(name)}"'
         up.append(f"tactile_device_up{{{d}}} {'1.0' if dev.up else '0.0'}\n")
-        if _finite(dev.last_success_timestamp_s):
-            last_ok.append(
-                f"tactile_last_poll_success_timestamp_seconds{{{d}}} {_g(dev.last_success_timestamp_s)}\n"
-            )  # type: ignore[arg-type]
+        last = dev.last_success_timestamp_s
+        if last is not None and math.isfinite(last):
+            last_ok.append(f"tactile_last_poll_success_timestamp_seconds{{{d}}} {_g(last)}\n")
         interval.append(f"tactile_poll_interval_seconds{{{d}}} {_g(dev.poll_interval_s)}\n")
         total.append(f"tactile_array_total_force_newtons{{{d}}} {_g(dev.total_force_n)}\n")
         if dev.center_of_pressure_mm is not None:
