@@ -39,6 +39,7 @@ from ..modbus.register_map import (
     status_registers,
 )
 from ..model import FRONT_END_KINDS, Divider, DividerStatus, FrontEnd, LowSideDivider, Transimpedance
+from ..model.conversion import CONVERSION_KINDS, Conversion, ConversionError, conversion_from_table
 from ..model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
 from ..model.params import PARAMETER_RANGES, Interval, ParameterError, SensorParams, parameter_names
 from .layout import LAYOUT_ORDERS, LAYOUT_ORIGINS, GridLayout
@@ -372,11 +373,55 @@ def _parse_param_overrides(ctx: Context, path: str, value: object) -> dict[str, 
     return out
 
 
+def _unknown_channel(cal_ctx: Context, where: str, name: str, channel_names: Sequence[str]) -> ConfigError:
+    return cal_ctx.error(
+        where,
+        f"no channel {name!r} in this device{suggest(name, channel_names)} "
+        f"(channels: {', '.join(channel_names[:8])}{', ...' if len(channel_names) > 8 else ''})",
+    )
+
+
+def _conversion_tables(
+    cal_ctx: Context, data: dict[str, Any], channel_names: Sequence[str]
+) -> dict[str, tuple[str, dict[str, Any]]]:
+    """``[line.<name>]`` / ``[lookup.<name>]`` tables by channel: (kind, table), checked later."""
+    out: dict[str, tuple[str, dict[str, Any]]] = {}
+    for kind in CONVERSION_KINDS:
+        tables = data.get(kind, {})
+        if not isinstance(tables, dict):
+            raise cal_ctx.error(kind, f"expected tables [{kind}.<name>], got {type_name(tables)}")
+        for name, body in tables.items():
+            where = join_key(kind, name)
+            if name not in channel_names:
+                raise _unknown_channel(cal_ctx, where, name, channel_names)
+            if not isinstance(body, dict):
+                raise cal_ctx.error(where, f"expected a table [{where}], got {type_name(body)}")
+            if name in out:
+                raise cal_ctx.error(where, f"channel {name!r} has a [line] and a [lookup] table; keep one")
+            out[name] = (kind, body)
+    return out
+
+
+def _conversion(
+    cal: tuple[Path, str], name: str, table: tuple[str, dict[str, Any]], params: SensorParams
+) -> Conversion:
+    """A channel's line or lookup; a line without its own force range takes the channel's."""
+    file, note = cal
+    kind, data = table
+    try:
+        return conversion_from_table(kind, data, params.force_min_n, params.force_max_n)
+    except ConversionError as exc:
+        field, _, index = exc.key.partition("[")
+        where = join_key(join_key(kind, name), field) + (f"[{index}" if index else "")
+        raise ConfigError(f"{Context(file).error(where, exc.message)}{note}") from None
+
+
 def _load_calibration(
     ctx: Context, path: str, file: Path, channel_names: Sequence[str]
-) -> tuple[dict[str, dict[str, float]], dict[str, float]]:
-    """Per-channel parameter tables ``[channel.<name>]`` of a calibration file, and the
-    channels' unloaded baselines (``baseline_ohm`` in the same tables)."""
+) -> tuple[dict[str, dict[str, float]], dict[str, float], dict[str, tuple[str, dict[str, Any]]]]:
+    """Per-channel parameter tables ``[channel.<name>]`` of a calibration file, the
+    channels' unloaded baselines (``baseline_ohm`` in the same tables) and their line or
+    lookup tables (``[line.<name>]``, ``[lookup.<name>]``)."""
     try:
         text = file.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -394,11 +439,7 @@ def _load_calibration(
         baselines: dict[str, float] = {}
         for name, params in tables.items():
             if name not in channel_names:
-                raise cal_ctx.error(
-                    join_key("channel", name),
-                    f"no channel {name!r} in this device{suggest(name, channel_names)} "
-                    f"(channels: {', '.join(channel_names[:8])}{', ...' if len(channel_names) > 8 else ''})",
-                )
+                raise _unknown_channel(cal_ctx, join_key("channel", name), name, channel_names)
             where = join_key("channel", name)
             if isinstance(params, dict) and "baseline_ohm" in params:
                 params = dict(params)
@@ -414,9 +455,10 @@ def _load_calibration(
                     )
                 baselines[name] = float(value)
             out[name] = _parse_param_overrides(cal_ctx, where, params)
+        conversions = _conversion_tables(cal_ctx, data, channel_names)
     except ConfigError as exc:
         raise ConfigError(f"{exc}{note}") from None
-    return out, baselines
+    return out, baselines, conversions
 
 
 def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
@@ -509,8 +551,12 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
 
     calibrated: dict[str, dict[str, float]] = {}
     calibrated_baselines: dict[str, float] = {}
+    conversions: dict[str, tuple[str, dict[str, Any]]] = {}
+    cal_note = (calibration or Path(), f" (calibration file of {table.at('calibration')} in {ctx.label})")
     if calibration is not None:
-        calibrated, calibrated_baselines = _load_calibration(ctx, table.at("calibration"), calibration, names)
+        calibrated, calibrated_baselines, conversions = _load_calibration(
+            ctx, table.at("calibration"), calibration, names
+        )
 
     channels: list[ChannelConfig] = []
     for i, channel_name in enumerate(names):
@@ -537,7 +583,12 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         except ParameterError as exc:
             raise ctx.error(blame, f"{exc} (channel {channel_name!r}, index {i})") from None
         baseline = baselines[i] if baselines is not None else calibrated_baselines.get(channel_name)
-        channels.append(ChannelConfig(i, channel_name, x_mm, y_mm, enabled, effects, params, baseline))
+        conversion = None
+        if channel_name in conversions:
+            conversion = _conversion(cal_note, channel_name, conversions[channel_name], params)
+        channels.append(
+            ChannelConfig(i, channel_name, x_mm, y_mm, enabled, effects, params, baseline, conversion)
+        )
 
     device = DeviceConfig(
         name=name,

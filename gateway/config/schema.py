@@ -18,6 +18,7 @@ from ..errors import ConfigError
 from ..modbus.plan import MODBUS_MAX_READ
 from ..modbus.register_map import ENCODINGS, DeviceChecks, RegisterMap
 from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
+from ..model.conversion import Conversion, LineConversion, LookupConversion
 from ..model.params import Interval
 from .layout import GridLayout
 from .mqtt import MqttConfig
@@ -38,6 +39,8 @@ __all__ = [
     "ChannelConfig",
     "DeviceConfig",
     "GatewayConfig",
+    "LineConversion",
+    "LookupConversion",
     "MetricsConfig",
     "RegisterMap",
     "TlsConfig",
@@ -146,6 +149,8 @@ class ChannelConfig:
     params: SensorParams
     #: the resistance this channel reads unloaded (ohm; ``tare``), or None: the model's own
     baseline_ohm: float | None = None
+    #: a calibration's line or lookup that reads force instead of the physical model, or None
+    conversion: Conversion | None = None
 
     def __post_init__(self) -> None:
         where = f"channel {self.name!r}"
@@ -166,6 +171,11 @@ class ChannelConfig:
             raise ConfigError(f"{where}: effects: {self.effects!r} must be in canonical order: {canonical!r}")
         if not isinstance(self.params, SensorParams):
             raise ConfigError(f"{where}: params: expected SensorParams, got {type(self.params).__name__}")
+        if self.conversion is not None and not isinstance(self.conversion, LineConversion | LookupConversion):
+            raise ConfigError(
+                f"{where}: conversion: expected None, LineConversion or LookupConversion, "
+                f"got {type(self.conversion).__name__}"
+            )
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ allowed range or values; an unknown key gets a "did you mean" suggestion.
 from __future__ import annotations
 
 import difflib
+import json
 import os
 import re
 import stat
@@ -96,7 +97,9 @@ def show_value(value: object) -> str:
 
 
 def join_key(path: str, key: str) -> str:
-    shown = key if _BARE_KEY_RE.fullmatch(key) else '"' + key.replace('"', '\\"') + '"'
+    # a quoted key as TOML writes it: quotes, backslashes and control characters escaped, so
+    # that a message naming it stays one line
+    shown = key if _BARE_KEY_RE.fullmatch(key) else json.dumps(key, ensure_ascii=False)
     return f"{path}.{shown}" if path else shown
 
 

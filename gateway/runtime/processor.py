@@ -14,7 +14,9 @@ Pure (no I/O, no clocks: times are passed in). Per channel:
    keeps falling by creep. ``invert_static`` (no creep state) is kept for diagnostics: its
    error grows with hold time (about +10 % after 10 min at 2 N for the default sensor).
    It is evaluated when first asked for (``DeviceSnapshot.force_static_n``, e.g. at a
-   scrape), so the poll path pays for one inversion, not two.
+   scrape), so the poll path pays for one inversion, not two. A channel whose calibration
+   gives a line or a lookup (``ChannelConfig.conversion``, ``gateway.model.conversion``) is
+   read with it instead, statelessly (no creep state; its static estimate is its force).
 3. Status per channel: ok, no_contact, saturated, open, short, stale, error.
 4. Array quantities from the channel positions (mm): total force (N), centre of pressure
    (force-weighted mean position over channels in contact), contact area (channels in
@@ -39,6 +41,7 @@ from ..config import ChannelConfig, DeviceConfig
 from ..errors import DecodeError
 from ..modbus.image import RawSample
 from ..model import DividerStatus, ForceStatus, FrontEnd, ModelState, SensorModel
+from ..model.conversion import ConversionSet
 from .snapshot import (
     VALUED,
     ChannelStatus,
@@ -200,7 +203,22 @@ def state_from_arrays(arrays: Sequence[FloatArray]) -> ModelState:
 
 def channel_key(device: DeviceConfig, channel: ChannelConfig) -> tuple[object, ...]:
     """Identity of a channel's physics: its creep state may only be reused when all match."""
-    return (device.name, device.encoding, channel.index, tuple(channel.effects), channel.params)
+    return (device.name, device.encoding, channel.index, tuple(channel.effects), channel.params) + (
+        () if channel.conversion is None else (channel.conversion,)
+    )
+
+
+@dataclass(frozen=True)
+class _StaticWithConversions(StaticEstimate):
+    """A static estimate whose converted channels (stateless) read their force."""
+
+    converted: NDArray[np.intp]
+    force_n: FloatArray
+
+    def evaluate(self) -> FloatArray:
+        out = np.array(super().evaluate())
+        out[self.converted] = self.force_n[self.converted]
+        return read_only(out)
 
 
 @dataclass(frozen=True, eq=False)
@@ -236,9 +254,13 @@ class DeviceProcessor:
         self.y_mm = np.array([c.y_mm for c in chans], dtype=np.float64)
         for a in (self.index, self.x_mm, self.y_mm):
             a.setflags(write=False)
+        # channels with a line or lookup are read with it, outside the physical model's groups
+        converted = any(c.conversion is not None for c in chans)
+        self.conversions = ConversionSet([c.conversion for c in chans]) if converted else None
         by_effects: dict[tuple[str, ...], list[int]] = {}
         for k, c in enumerate(chans):
-            by_effects.setdefault(tuple(c.effects), []).append(k)
+            if c.conversion is None:
+                by_effects.setdefault(tuple(c.effects), []).append(k)
         self.groups: tuple[tuple[NDArray[np.intp], SensorModel], ...] = tuple(
             (np.array(ks, dtype=np.intp), SensorModel(effects, [chans[k].params for k in ks]))
             for effects, ks in by_effects.items()
@@ -269,6 +291,8 @@ class DeviceProcessor:
         for ks, model in self.groups:
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
                 r0[ks] = model.resistance(np.zeros(len(ks)))
+        if self.conversions is not None:  # a line's or lookup's unloaded end (its lower force bound)
+            r0[self.conversions.positions] = self.conversions.unloaded_ohm
         pos = np.array(positions, dtype=np.intp)
         baseline = np.array([self.channels[k].baseline_ohm for k in positions], dtype=np.float64)
         g0 = np.where(np.isinf(r0[pos]), 0.0, 1.0 / r0[pos])
@@ -464,6 +488,8 @@ class DeviceProcessor:
                 for dst, src in zip(new, state_arrays(gstate), strict=True):
                     dst[idx] = src
             new_state_model = state_from_arrays(new)
+            if self.conversions is not None:
+                self.conversions.apply(r_model, force, model_status)
         return TrackedSample(
             raw, r_out, r_model, base, force, model_status, temperature,
             DeviceState(new_state_model, now, host_time_s, use_device, None, clock_health), wall_time_s,
@@ -484,6 +510,12 @@ class DeviceProcessor:
             reference = read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
         q = array_quantities(force, status, self.x_mm, self.y_mm, self.device.layout.cell_area_mm2)
         wall_time_s = tracked.wall_time_s
+        inputs = (self.groups, read_only(tracked.model_resistance_ohm), temperature, read_only(valued))
+        static = (
+            StaticEstimate(*inputs)
+            if self.conversions is None
+            else _StaticWithConversions(*inputs, self.conversions.positions, force)
+        )
         snap = DeviceSnapshot(
             device=self.device.name,
             bus=self.bus,
@@ -493,9 +525,7 @@ class DeviceProcessor:
             y_mm=self.y_mm,
             resistance_ohm=read_only(tracked.resistance_ohm),
             force_n=read_only(force),
-            static_estimate=StaticEstimate(
-                self.groups, read_only(tracked.model_resistance_ohm), temperature, read_only(valued)
-            ),
+            static_estimate=static,
             reference_force_n=reference,
             status=read_only(status),
             up=True,

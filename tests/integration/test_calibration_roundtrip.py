@@ -133,3 +133,27 @@ def test_calibrated_gateway_reads_within_a_tenth_of_a_newton(tmp_path: Path) -> 
     err2 = np.abs(force2[ok2] - reference2[ok2])
     print(f"default parameters: mean error {err2.mean():.3f} N")
     assert err2.mean() > 2 * err.mean()
+
+
+def test_a_line_calibration_is_read_by_the_gateway(tmp_path: Path) -> None:
+    """``calibrate --model line``: the gateway reads the channel with the line, not the model."""
+    record = asyncio.run(_record_bench(tmp_path))
+    cal = tmp_path / "line.toml"
+    result = CliRunner().invoke(main, ["calibrate", str(record), "--model", "line", "--out", str(cal)])
+    assert result.exit_code == 0, result.output
+    assert '[line."ch00"]' in cal.read_text()
+    config_path = tmp_path / "line-config.toml"
+    config_path.write_text(_config_text(5020, cal))
+    ((_, device),) = load_config(config_path).devices()
+    assert device.channels[0].conversion is not None
+
+    t, force, reference, status = asyncio.run(_read_with_calibration(tmp_path, cal))
+    valued = {int(ChannelStatus.OK), int(ChannelStatus.NO_CONTACT), int(ChannelStatus.SATURATED)}
+    assert set(status.tolist()) <= valued
+    steps = t[np.flatnonzero(np.diff(reference) != 0) + 1]
+    since_step = t - np.array([steps[steps <= x].max(initial=t[0]) for x in t])
+    loaded = (since_step >= 2.0) & (reference > 0) & (status == int(ChannelStatus.OK))
+    err = np.abs(force[loaded] - reference[loaded])
+    print(f"\nline calibration: mean error {err.mean():.3f} N over {loaded.sum()} settled samples")
+    assert loaded.sum() > 200
+    assert err.mean() < 0.5  # the line has no creep correction: coarser than the model, but a reading

@@ -1,0 +1,264 @@
+"""Per-channel conversions that replace the physical model: the paper's line and a lookup.
+
+``tactile-gateway calibrate --model line|lookup|auto`` writes, for a channel whose physical
+model loses on held-out force, a ``[line.<name>]`` or ``[lookup.<name>]`` table
+(``docs/calibration.md``). A channel with one reads force without the physical model:
+
+* ``LineConversion``: the conductance line C = m F + n, so F = (1/R - n) / m;
+* ``LookupConversion``: F by linear interpolation in ln R between knots (resistance strictly
+  increasing, force non-increasing), flat beyond the ends.
+
+Both are stateless (no creep state: the static estimate equals the force) and share the
+inversion's statuses: a force at or below the lower bound (or at or below 0 N) reads 0 N
+``NO_CONTACT``, at or above the upper bound ``SATURATED`` with the bound, a NaN, zero or
+negative resistance ``INVALID``. ``ConversionSet`` evaluates every converted channel of a
+device at once, each kind vectorised over its channels.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .inversion import ForceStatus
+
+__all__ = [
+    "CONVERSION_KINDS",
+    "Conversion",
+    "ConversionError",
+    "ConversionSet",
+    "LineConversion",
+    "LookupConversion",
+    "conversion_from_table",
+]
+
+FloatArray = NDArray[np.float64]
+StatusArray = NDArray[np.int8]
+BoolArray = NDArray[np.bool_]
+
+#: The calibration-file tables that name a conversion, by kind.
+CONVERSION_KINDS = ("line", "lookup")
+_LINE_KEYS = ("slope_s_per_n", "intercept_s", "force_min_n", "force_max_n", "held_out_force_rms_n")
+_LOOKUP_KEYS = ("resistance_ohm", "force_n", "held_out_force_rms_n")
+
+# status by 4 * invalid + 2 * (F <= lower) + (F >= upper); as the inversion's
+_OK, _NO_CONTACT, _SATURATED, _INVALID = (int(s) for s in ForceStatus)
+_STATUS_BY_CODE = np.array(
+    [_OK, _SATURATED, _NO_CONTACT, _NO_CONTACT, _INVALID, _INVALID, _INVALID, _INVALID], dtype=np.int8
+)
+
+
+class ConversionError(ValueError):
+    """A conversion's value outside its allowed range; ``key`` names the offending field."""
+
+    def __init__(self, key: str, message: str) -> None:
+        super().__init__(f"{key}: {message}")
+        self.key = key
+        self.message = message
+
+
+def _finite(key: str, value: object, unit: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ConversionError(key, f"{value!r} is out of range; allowed: a finite number ({unit})")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class LineConversion:
+    """F = (1/R - n) / m over [force_min_n, force_max_n] (m in S/N, n in S, forces in N)."""
+
+    slope_s_per_n: float
+    intercept_s: float
+    force_min_n: float
+    force_max_n: float
+
+    def __post_init__(self) -> None:
+        m = _finite("slope_s_per_n", self.slope_s_per_n, "S/N")
+        if not m > 0.0:
+            raise ConversionError(
+                "slope_s_per_n", f"{m!r} is out of range; allowed: (0, inf) S/N (conductance rises with F)"
+            )
+        _finite("intercept_s", self.intercept_s, "S")
+        low = _finite("force_min_n", self.force_min_n, "N")
+        high = _finite("force_max_n", self.force_max_n, "N")
+        if not low > 0.0:
+            raise ConversionError("force_min_n", f"{low!r} is out of range; allowed: (0, inf) N")
+        if not high > low:
+            raise ConversionError(
+                "force_max_n", f"{high!r} is out of range; allowed: (force_min_n = {low!r}, inf) N"
+            )
+
+    @property
+    def unloaded_conductance_s(self) -> float:
+        """The line's conductance at 0 N, n (S; 0 when n <= 0: open there)."""
+        return max(0.0, self.intercept_s)
+
+
+@dataclass(frozen=True)
+class LookupConversion:
+    """F against ln R through the knots ``(resistance_ohm[i], force_n[i])``, flat beyond the ends."""
+
+    resistance_ohm: tuple[float, ...]
+    force_n: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        for key, values in (("resistance_ohm", self.resistance_ohm), ("force_n", self.force_n)):
+            if not isinstance(values, tuple) or len(values) < 2:
+                raise ConversionError(key, f"expected at least 2 points, got {values!r}")
+        if len(self.resistance_ohm) != len(self.force_n):
+            raise ConversionError(
+                "force_n",
+                f"{len(self.force_n)} forces for {len(self.resistance_ohm)} resistances; one per resistance",
+            )
+        r = [_finite(f"resistance_ohm[{i}]", v, "ohm") for i, v in enumerate(self.resistance_ohm)]
+        f = [_finite(f"force_n[{i}]", v, "N") for i, v in enumerate(self.force_n)]
+        for i in range(len(r)):
+            if not r[i] > 0.0:
+                raise ConversionError(
+                    f"resistance_ohm[{i}]", f"{r[i]!r} is out of range; allowed: (0, inf) ohm"
+                )
+            if i and not r[i] > r[i - 1]:
+                raise ConversionError(
+                    f"resistance_ohm[{i}]",
+                    f"{r[i]!r} after {r[i - 1]!r}: resistances must be strictly increasing",
+                )
+            if i and f[i] > f[i - 1]:
+                raise ConversionError(
+                    f"force_n[{i}]",
+                    f"{f[i]!r} after {f[i - 1]!r}: forces must not increase with resistance (non-increasing)",
+                )
+        if not f[0] > f[-1]:
+            raise ConversionError("force_n", f"all forces are {f[0]!r}: the lookup needs a force range")
+
+    @property
+    def unloaded_conductance_s(self) -> float:
+        """The conductance where the lookup reaches 0 N (S): inside the table where its forces
+        go that low, else on its last sloped segment extended in ln R."""
+        log_r = np.log(np.asarray(self.resistance_ohm))
+        f = np.asarray(self.force_n)
+        if f[0] <= 0.0:  # never above 0 N: every reading is no contact
+            return float(np.exp(-log_r[0]))
+        if f[-1] > 0.0:
+            k = int(np.flatnonzero(f > f[-1])[-1])  # the last knot above the lowest force
+            return float(np.exp(-(log_r[-1] + f[-1] * (log_r[-1] - log_r[k]) / (f[k] - f[-1]))))
+        j = int(np.flatnonzero(f <= 0.0)[0])  # the first knot at or below 0 N (j >= 1)
+        t = f[j - 1] / (f[j - 1] - f[j])
+        return float(np.exp(-(log_r[j - 1] + t * (log_r[j] - log_r[j - 1]))))
+
+
+Conversion = LineConversion | LookupConversion
+
+
+def conversion_from_table(
+    kind: str, data: Mapping[str, object], force_min_n: float, force_max_n: float
+) -> Conversion:
+    """A conversion from a calibration file's ``[line.<name>]`` / ``[lookup.<name>]`` table;
+    a line without its own force range takes the channel's (``force_min_n``/``force_max_n``).
+    ``ConversionError`` names the key."""
+    allowed = _LINE_KEYS if kind == "line" else _LOOKUP_KEYS
+    for key in data:
+        if key not in allowed:
+            raise ConversionError(key, f"unknown key; allowed: {', '.join(allowed)}")
+    if "held_out_force_rms_n" in data:
+        _finite("held_out_force_rms_n", data["held_out_force_rms_n"], "N")
+    required = allowed[:2]
+    for key in required:
+        if key not in data:
+            need = " and ".join(required)
+            raise ConversionError(key, f"required key is missing ({kind} tables need {need})")
+    if kind == "line":
+        return LineConversion(
+            slope_s_per_n=data["slope_s_per_n"],  # type: ignore[arg-type]  # checked by the dataclass
+            intercept_s=data["intercept_s"],  # type: ignore[arg-type]
+            force_min_n=data.get("force_min_n", force_min_n),  # type: ignore[arg-type]
+            force_max_n=data.get("force_max_n", force_max_n),  # type: ignore[arg-type]
+        )
+    points: list[tuple[float, ...]] = []
+    for key in required:
+        values = data[key]
+        if not isinstance(values, list):
+            raise ConversionError(key, f"expected an array of numbers, got {values!r}")
+        points.append(tuple(values))
+    return LookupConversion(points[0], points[1])
+
+
+class ConversionSet:
+    """Every converted channel of a device: positions and parameters, per kind, as arrays."""
+
+    def __init__(self, conversions: Sequence[Conversion | None]) -> None:
+        lines = [(k, c) for k, c in enumerate(conversions) if isinstance(c, LineConversion)]
+        lookups = [(k, c) for k, c in enumerate(conversions) if isinstance(c, LookupConversion)]
+        self.line_pos = np.array([k for k, _ in lines], dtype=np.intp)
+        self.slope = np.array([c.slope_s_per_n for _, c in lines], dtype=np.float64)
+        self.intercept = np.array([c.intercept_s for _, c in lines], dtype=np.float64)
+        self.line_low = np.array([c.force_min_n for _, c in lines], dtype=np.float64)
+        self.line_high = np.array([c.force_max_n for _, c in lines], dtype=np.float64)
+        # the resistances at the bounds, compared as the inversion compares R with R(force_min/max)
+        with np.errstate(divide="ignore"):
+            self.line_r_low = np.where(
+                self.slope * self.line_low + self.intercept > 0.0,
+                1.0 / (self.slope * self.line_low + self.intercept),
+                np.inf,
+            )
+            self.line_r_high = 1.0 / (self.slope * self.line_high + self.intercept)
+        self.lookup_pos = np.array([k for k, _ in lookups], dtype=np.intp)
+        # knots padded to the longest table: ln R with +inf, force with the last value
+        width = max((len(c.force_n) for _, c in lookups), default=2)
+        self.log_r = np.full((len(lookups), width), np.inf)
+        self.knot_f = np.zeros((len(lookups), width))
+        self.last = np.array([len(c.force_n) - 1 for _, c in lookups], dtype=np.intp)
+        for i, (_, c) in enumerate(lookups):
+            self.log_r[i, : len(c.force_n)] = np.log(c.resistance_ohm)
+            self.knot_f[i] = c.force_n[-1]
+            self.knot_f[i, : len(c.force_n)] = c.force_n
+        rows = np.arange(len(lookups))
+        self.lookup_high = self.knot_f[:, 0].copy()
+        self.lookup_low = np.maximum(self.knot_f[rows, self.last], 0.0)
+        self.positions = np.concatenate([self.line_pos, self.lookup_pos])
+        self.unloaded_ohm = np.array(
+            [1.0 / g if g > 0.0 else np.inf for g in (c.unloaded_conductance_s for _, c in lines + lookups)],
+            dtype=np.float64,
+        )
+
+    def apply(self, resistance_ohm: FloatArray, force_n: FloatArray, status: StatusArray) -> None:
+        """Write force (N) and ``ForceStatus`` of the converted channels into the device's arrays."""
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            if self.line_pos.size:
+                r = resistance_ohm[self.line_pos]
+                f = (np.where(np.isinf(r), 0.0, 1.0 / r) - self.intercept) / self.slope
+                force_n[self.line_pos], status[self.line_pos] = self._ends(
+                    f, ~(r > 0.0), r >= self.line_r_low, r <= self.line_r_high, self.line_high
+                )
+            if self.lookup_pos.size:
+                r = resistance_ohm[self.lookup_pos]
+                f = self._interpolate(np.log(r))
+                force_n[self.lookup_pos], status[self.lookup_pos] = self._ends(
+                    f, ~(r > 0.0), f <= self.lookup_low, f >= self.lookup_high, self.lookup_high
+                )
+
+    def _interpolate(self, x: FloatArray) -> FloatArray:
+        """Linear in ln R between each table's knots; flat beyond its ends (NaN stays NaN)."""
+        rows = np.arange(x.size)
+        above = np.count_nonzero(self.log_r <= x[:, None], axis=1)  # knots at or below x
+        j = np.clip(above, 1, self.last)
+        x0, x1 = self.log_r[rows, j - 1], self.log_r[rows, j]
+        f0, f1 = self.knot_f[rows, j - 1], self.knot_f[rows, j]
+        t = np.clip((x - x0) / (x1 - x0), 0.0, 1.0)
+        return np.asarray(f0 * (1.0 - t) + f1 * t)  # exactly a knot's force at t = 0 and 1
+
+    @staticmethod
+    def _ends(
+        f: FloatArray, invalid: BoolArray, at_low: BoolArray, at_high: BoolArray, high: FloatArray
+    ) -> tuple[FloatArray, StatusArray]:
+        """Force and status: 0 N at or below the lower bound, the bound at or above the upper."""
+        code = invalid.view(np.int8) * np.int8(4)
+        code += at_low.view(np.int8) * np.int8(2)
+        code += at_high.view(np.int8)
+        status = _STATUS_BY_CODE[code]
+        out = np.where(status == _OK, f, np.where(status == _SATURATED, high, 0.0))
+        out[invalid] = np.nan
+        return out, status
