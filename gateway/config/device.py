@@ -19,33 +19,18 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, Final
 
-import numpy as np
-
 from ..errors import ConfigError
 from ..modbus.register_map import (
-    BYTE_ORDERS,
-    CLOCK_REGISTERS,
-    CLOCK_UNITS,
     ENCODINGS,
-    IDENTIFICATION_FIELDS,
-    MAX_ADDRESS,
-    REGISTER_TABLES,
-    STATUS_BITMAP_STRIDE,
-    DeviceChecks,
-    DeviceClock,
-    RegisterCheck,
-    RegisterMap,
-    register_blocks,
-    status_registers,
 )
-from ..model import FRONT_END_KINDS, Divider, DividerStatus, FrontEnd, LowSideDivider, Transimpedance
 from ..model.conversion import CONVERSION_KINDS, Conversion, ConversionError, conversion_from_table
 from ..model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
-from ..model.params import PARAMETER_RANGES, Interval, ParameterError, SensorParams, parameter_names
-from .layout import LAYOUT_ORDERS, LAYOUT_ORIGINS, GridLayout
+from ..model.params import PARAMETER_RANGES, ParameterError, SensorParams, parameter_names
 from .profiles import load_profile, merge_profile
-from .schema import DEVICE_ID, MAX_CHANNELS, PITCH_MM, POSITION_MM, ChannelConfig, DeviceConfig
+from .readout import DIVIDER_KEYS, LAYOUT_KEYS, parse_baselines, parse_divider, parse_front_end, parse_layout
+from .schema import DEVICE_ID, MAX_CHANNELS, POSITION_MM, ChannelConfig, DeviceConfig
 from .tables import REQUIRED, Context, Table, join_key, parse_toml, show_value, suggest, type_name
+from .wire import CHECK_KEYS, REGISTER_KEYS, check_overlaps, parse_checks, parse_clock, parse_registers
 
 __all__ = ["DEVICE_KEYS", "parse_device"]
 
@@ -70,265 +55,9 @@ DEVICE_KEYS: Final = (
     "model",
     "channel",
 )
-_REGISTER_KEYS: Final = (
-    "table",
-    "adc_address",
-    "float_address",
-    "word_order",
-    "byte_order",
-    "status_address",
-    "force_reference_address",
-    "temperature_address",
-)
-_CLOCK_KEYS: Final = ("address", "registers", "unit", "tick_s", "table")
-_CHECK_KEYS: Final = ("registers", "channel_count", "identification")
-_REGISTER_CHECK_KEYS: Final = ("what", "table", "address", "value")
-_COUNT_CHECK_KEYS: Final = ("table", "address")
-_LAYOUT_KEYS: Final = ("columns", "pitch_mm", "pitch_x_mm", "pitch_y_mm", "origin", "order")
-_DIVIDER_KEYS: Final = ("supply_v", "reference_ohm", "adc_bits")
-_ADC_KEYS: Final = ("adc_bits", "adc_reference_v", "adc_offset_counts")
-_FRONT_END_KEYS: Final = {
-    "high_side": ("kind", "supply_v", "reference_ohm", *_ADC_KEYS),
-    "low_side": ("kind", "supply_v", "reference_ohm", *_ADC_KEYS),
-    "transimpedance": ("kind", "bias_v", "feedback_ohm", "output_offset_v", *_ADC_KEYS),
-}
 _MODEL_KEYS: Final = ("effects", "params")
 _CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params")
 _CALIBRATION_CHANNEL_TABLE: Final = "channel"
-
-_POSITIVE: Final = Interval(0.0, math.inf, low_inclusive=False, high_inclusive=False)
-_POSITIVE_OR_UNSET: Final = Interval(0.0, math.inf, low_inclusive=True, high_inclusive=False)
-_FINITE: Final = Interval(-math.inf, math.inf, low_inclusive=False, high_inclusive=False)
-
-
-def _parse_registers(table: Table, n: int, encoding: str, profile: str | None) -> RegisterMap:
-    status_span = 2 * STATUS_BITMAP_STRIDE + status_registers(n)
-    value_key = "adc_address" if encoding == "adc" else "float_address"
-    if not table.has(value_key):
-        hint = f" ({profile} does not give it)" if profile else ""
-        raise table.error(
-            value_key,
-            f"required key is missing{hint}: where the device keeps its {encoding} values; name a "
-            'profile (profile = "tactile-sim" for the simulator, docs/profiles.md) or give '
-            f"[bus.device.registers] {value_key} (`tactile-gateway scan` finds it)",
-        )
-    defaults = RegisterMap()
-    return RegisterMap(
-        adc_address=table.integer(
-            "adc_address", defaults.adc_address, 0, MAX_ADDRESS + 1 - n, f" (the {n}-register ADC block)"
-        ),
-        float_address=table.integer(
-            "float_address",
-            defaults.float_address,
-            0,
-            MAX_ADDRESS + 1 - 2 * n,
-            f" (the {2 * n}-register float32 block)",
-        ),
-        word_order=table.choice("word_order", "big", BYTE_ORDERS),
-        byte_order=table.choice("byte_order", "big", BYTE_ORDERS),
-        status_address=table.optional_address("status_address", None, MAX_ADDRESS + 1 - status_span),
-        force_reference_address=table.optional_address(
-            "force_reference_address", None, MAX_ADDRESS + 1 - 2 * n
-        ),
-        temperature_address=table.optional_address("temperature_address", None, MAX_ADDRESS + 1 - 2 * n),
-        clock=None,
-        table=table.choice("table", "input", REGISTER_TABLES),
-    )
-
-
-def _parse_clock(ctx: Context, path: str, value: object) -> DeviceClock | None:
-    """``clock = "host"`` (the host's monotonic clock) or a table naming the register."""
-    if value is None or value == "host":
-        return None
-    if not isinstance(value, dict):
-        raise ctx.error(
-            path,
-            f'expected "host" or a table {{ address = ..., registers = 1 | 2 | 4, unit = "ms" }}, '
-            f"got {type_name(value)} {show_value(value)}",
-        )
-    table = Table(ctx, value, path, _CLOCK_KEYS)
-    registers = table.integer("registers", REQUIRED, 1, 4, " (1, 2 or 4: a 16, 32 or 64-bit counter)")
-    if registers not in CLOCK_REGISTERS:
-        raise table.error(
-            "registers", f"{registers} is not allowed; allowed: 1, 2, 4 (16, 32 or 64-bit counter)"
-        )
-    address = table.integer("address", REQUIRED, 0, MAX_ADDRESS + 1 - registers)
-    if table.has("unit") and table.has("tick_s"):
-        raise table.error("tick_s", "give unit or tick_s, not both")
-    if table.has("tick_s"):
-        tick_s = table.number("tick_s", REQUIRED, Interval(0.0, 3600.0, low_inclusive=False), " s")
-    else:
-        tick_s = CLOCK_UNITS[table.choice("unit", REQUIRED, tuple(CLOCK_UNITS))]
-    return DeviceClock(address, registers, tick_s, table.choice("table", "input", REGISTER_TABLES))
-
-
-def _parse_checks(table: Table, n: int) -> DeviceChecks:
-    ctx = table.ctx
-    registers: list[RegisterCheck] = []
-    for rpath, item in table.tables("registers", "registers = [{ what = ..., address = ..., value = ... }]"):
-        entry = Table(ctx, item, rpath, _REGISTER_CHECK_KEYS)
-        registers.append(
-            RegisterCheck(
-                what=entry.string("what", "register", "a short description") or "register",
-                table=entry.choice("table", "input", REGISTER_TABLES),
-                address=entry.integer("address", REQUIRED, 0, MAX_ADDRESS),
-                value=entry.integer("value", REQUIRED, 0, 0xFFFF),
-            )
-        )
-    if table.has("channel_count"):
-        count = table.table(
-            "channel_count", _COUNT_CHECK_KEYS, "channel_count = { table = ..., address = ... }"
-        )
-        registers.append(
-            RegisterCheck(
-                what="channel count",
-                table=count.choice("table", "holding", REGISTER_TABLES),
-                address=count.integer("address", REQUIRED, 0, MAX_ADDRESS),
-                value=n,
-            )
-        )
-    ident = table.table("identification", IDENTIFICATION_FIELDS, "identification = { product_code = ... }")
-    expected = tuple(
-        (key, ident.required_string(key, "the text the device reports"))
-        for key in IDENTIFICATION_FIELDS
-        if ident.has(key)
-    )
-    return DeviceChecks(tuple(registers), expected)
-
-
-def _parse_layout(device: Table, table: Table, n: int) -> GridLayout:
-    for key in ("columns", "pitch_mm"):
-        if device.has(key) and table.has(key):
-            raise device.error(key, f"given twice: here and as layout.{key}; keep one")
-    source = table if table.has("columns") else device
-    columns = source.integer("columns", math.isqrt(n - 1) + 1, 1, n, f" (at most channels = {n})")
-    source = table if table.has("pitch_mm") else device
-    pitch = source.number("pitch_mm", 2.5, PITCH_MM, " mm")
-    return GridLayout(
-        n_channels=n,
-        columns=columns,
-        pitch_x_mm=table.number("pitch_x_mm", pitch, PITCH_MM, " mm"),
-        pitch_y_mm=table.number("pitch_y_mm", pitch, PITCH_MM, " mm"),
-        origin=table.choice("origin", "top-left", LAYOUT_ORIGINS),
-        order=table.choice("order", "row-major", LAYOUT_ORDERS),
-    )
-
-
-def _parse_baselines(table: Table, n: int, front_end: FrontEnd | None) -> tuple[float | None, ...] | None:
-    """Per-channel unloaded resistance (ohm) from ``baseline_counts`` or ``baseline_ohm``."""
-    if table.has("baseline_counts") and table.has("baseline_ohm"):
-        raise table.error("baseline_ohm", "give baseline_counts or baseline_ohm, not both")
-    key = "baseline_counts" if table.has("baseline_counts") else "baseline_ohm"
-    if not table.has(key):
-        return None
-    values = table.data[key]
-    if not isinstance(values, list) or len(values) != n:
-        got = (
-            f"{len(values)} values"
-            if isinstance(values, list)
-            else f"{type_name(values)} {show_value(values)}"
-        )
-        raise table.error(
-            key, f"expected an array of {n} numbers (one per channel, in index order), got {got}"
-        )
-    out: list[float | None] = []
-    for i, value in enumerate(values):
-        where = f"{table.at(key)}[{i}]"
-        if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
-            raise table.ctx.error(where, f"expected a number, got {type_name(value)} {show_value(value)}")
-        if key == "baseline_ohm":
-            if not value > 0.0:
-                raise table.ctx.error(
-                    where, f"{value!r} is out of range; allowed: (0, inf] ohm (inf: open at rest)"
-                )
-            out.append(float(value))
-            continue
-        if front_end is None:
-            raise table.error(key, 'counts need an ADC front end (encoding = "adc"); use baseline_ohm')
-        r, status = front_end.resistance(np.array([value], dtype=np.float64))
-        resistance = float(r[0])
-        if int(status[0]) == int(DividerStatus.INVALID) or not resistance > 0.0:
-            raise table.ctx.error(
-                where,
-                f"{value!r} counts is not an unloaded reading of this front end ({front_end.describe()}): "
-                f"it reads {resistance:g} ohm",
-            )
-        out.append(resistance)
-    return tuple(out)
-
-
-def _check_overlaps(ctx: Context, path: str, device: DeviceConfig) -> None:
-    keys = {
-        "status": "status_address",
-        "adc": "adc_address",
-        "float": "float_address",
-        "force_reference": "force_reference_address",
-        "temperature": "temperature_address",
-        "device_time": "address",
-    }
-    blocks = register_blocks(device)
-    for i, later in enumerate(blocks):
-        for earlier in blocks[:i]:
-            if later.kind == earlier.kind and later.address <= earlier.end and earlier.address <= later.end:
-                # the clock is the block a user adds over a map, so it carries the blame
-                blamed, other = (earlier, later) if earlier.purpose == "device_time" else (later, earlier)
-                table = "clock" if blamed.purpose == "device_time" else "registers"
-                raise ctx.error(
-                    f"{path}.{table}.{keys[blamed.purpose]}",
-                    f"the {blamed.name} block {blamed.address}..{blamed.end} overlaps the {other.name} block "
-                    f"{other.address}..{other.end}; register blocks must not overlap",
-                )
-
-
-def _parse_divider(table: Table) -> FrontEnd:
-    """The older spelling of a high-side divider: ``[bus.device.divider]``."""
-    return _front_end(
-        table,
-        Divider,
-        supply_v=table.number("supply_v", 5.0, _POSITIVE, " V"),
-        reference_ohm=table.number("reference_ohm", 10e3, _POSITIVE, " ohm"),
-        adc_bits=table.integer("adc_bits", 16, 8, 16, " (ADC counts are one 16-bit register)"),
-    )
-
-
-def _front_end(table: Table, cls: type[FrontEnd], **params: Any) -> FrontEnd:
-    try:
-        return cls(**params)
-    except ValueError as exc:
-        field = str(exc).split(" ", 1)[0]
-        key = field if field in params else "kind"
-        raise table.error(key, str(exc)) from None
-
-
-def _parse_front_end(ctx: Context, path: str, data: dict[str, Any]) -> FrontEnd:
-    """``[bus.device.front_end]``: the read-out circuit (docs/front-ends.md)."""
-    kind_table = Table(ctx, data, path, sorted({k for keys in _FRONT_END_KEYS.values() for k in keys}))
-    kind = kind_table.choice("kind", REQUIRED, FRONT_END_KINDS)
-    table = Table(ctx, data, path, _FRONT_END_KEYS[kind])
-    adc: dict[str, Any] = {
-        "adc_bits": table.integer("adc_bits", REQUIRED, 8, 16, " (ADC counts are one 16-bit register)"),
-        "adc_offset_counts": table.number("adc_offset_counts", 0.0, _FINITE, " counts"),
-    }
-    if kind == "transimpedance":
-        return _front_end(
-            table,
-            Transimpedance,
-            bias_v=table.number("bias_v", REQUIRED, _POSITIVE, " V"),
-            feedback_ohm=table.number("feedback_ohm", REQUIRED, _POSITIVE, " ohm"),
-            adc_reference_v=table.number("adc_reference_v", REQUIRED, _POSITIVE, " V"),
-            output_offset_v=table.number("output_offset_v", 0.0, _FINITE, " V"),
-            **adc,
-        )
-    cls: type[FrontEnd] = Divider if kind == "high_side" else LowSideDivider
-    reference_v = table.number("adc_reference_v", 0.0, _POSITIVE_OR_UNSET, " V (0: the supply)")
-    return _front_end(
-        table,
-        cls,
-        supply_v=table.number("supply_v", REQUIRED, _POSITIVE, " V"),
-        reference_ohm=table.number("reference_ohm", REQUIRED, _POSITIVE, " ohm"),
-        adc_reference_v=reference_v or None,
-        **adc,
-    )
 
 
 def _parse_effects(ctx: Context, path: str, value: object) -> tuple[str, ...]:
@@ -473,26 +202,26 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
     device_id = table.integer("device_id", REQUIRED, *DEVICE_ID)
     encoding = table.choice("encoding", "adc", ENCODINGS)
     n = table.integer("channels", REQUIRED, 1, MAX_CHANNELS)
-    layout = _parse_layout(table, table.table("layout", _LAYOUT_KEYS, "[bus.device.layout]"), n)
+    layout = parse_layout(table, table.table("layout", LAYOUT_KEYS, "[bus.device.layout]"), n)
     allow_write = table.boolean("allow_write", False)
     calibration = table.path_value("calibration")
-    registers = _parse_registers(
-        table.table("registers", _REGISTER_KEYS, "[bus.device.registers]"), n, encoding, profile
+    registers = parse_registers(
+        table.table("registers", REGISTER_KEYS, "[bus.device.registers]"), n, encoding, profile
     )
-    clock = _parse_clock(ctx, table.at("clock"), data.get("clock"))
+    clock = parse_clock(ctx, table.at("clock"), data.get("clock"))
     if clock is not None:
         registers = replace(registers, clock=clock)
-    checks = _parse_checks(table.table("checks", _CHECK_KEYS, "[bus.device.checks]"), n)
+    checks = parse_checks(table.table("checks", CHECK_KEYS, "[bus.device.checks]"), n)
     if table.has("divider") and table.has("front_end"):
         raise table.error(
             "divider", "give front_end or divider (the older spelling of a high-side front end), not both"
         )
     if table.has("front_end"):
-        front_end = _parse_front_end(
+        front_end = parse_front_end(
             ctx, table.at("front_end"), table.raw_table("front_end", "[bus.device.front_end]")
         )
     elif table.has("divider") or encoding == "float32":
-        front_end = _parse_divider(table.table("divider", _DIVIDER_KEYS, "[bus.device.divider]"))
+        front_end = parse_divider(table.table("divider", DIVIDER_KEYS, "[bus.device.divider]"))
     else:
         raise table.error(
             "front_end",
@@ -500,7 +229,7 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
             '(kind = "high_side" | "low_side" | "transimpedance", docs/front-ends.md), '
             "or a profile that names it",
         )
-    baselines = _parse_baselines(table, n, front_end if encoding == "adc" else None)
+    baselines = parse_baselines(table, n, front_end if encoding == "adc" else None)
 
     model = table.table("model", _MODEL_KEYS, "[bus.device.model]")
     device_effects = (
@@ -604,5 +333,5 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         checks=checks,
         profile=profile,
     )
-    _check_overlaps(ctx, path, device)
+    check_overlaps(ctx, path, device)
     return device

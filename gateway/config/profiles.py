@@ -15,7 +15,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Final
 
-from .tables import Context, Table, parse_toml, suggest
+from ..errors import ConfigError
+from .tables import Context, Table, parse_toml, read_text_file, suggest
 
 __all__ = ["MERGED_TABLES", "PROFILE_KEYS", "builtin_profiles", "load_profile", "merge_profile"]
 
@@ -75,12 +76,12 @@ def load_profile(ctx: Context, key_path: str, reference: str) -> tuple[str, dict
         profile_ctx = Context(Path(f"<profile {reference}>"))
     else:
         file = ctx.resolve(reference)
-        try:
-            text = file.read_bytes().decode("utf-8")
-        except FileNotFoundError:
-            raise ctx.error(key_path, f"{file} does not exist (device profile)") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ctx.error(key_path, f"cannot read the device profile {file}: {exc}") from None
+        if not file.exists():
+            raise ctx.error(key_path, f"{file} does not exist (device profile)")
+        try:  # a regular file of bounded size: /dev/zero is refused unread
+            text = read_text_file(file, "device profile")
+        except ConfigError as exc:
+            raise ctx.error(key_path, f"cannot read the device profile: {exc}") from None
         label = f"profile {str(file)!r}"
         profile_ctx = Context(file)
     data = parse_toml(profile_ctx, text, "device profile")
