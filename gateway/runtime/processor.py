@@ -30,7 +30,6 @@ reaches the metrics.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 
@@ -40,144 +39,35 @@ from numpy.typing import NDArray
 from ..config import ChannelConfig, DeviceConfig
 from ..errors import DecodeError
 from ..modbus.image import RawSample
-from ..model import DividerStatus, ForceStatus, FrontEnd, ModelState, SensorModel
+from ..model import ModelState, SensorModel
 from ..model.conversion import ConversionSet
+from .baseline import BaselineCorrection
+from .clock import NO_CLOCK_HISTORY, ClockHealth, time_step
 from .snapshot import (
     VALUED,
-    ChannelStatus,
     DeviceSnapshot,
     StaticEstimate,
     array_quantities,
     frozen_copy,
     read_only,
 )
+from .status_tables import (
+    _BASE_FROM_BITMAPS,
+    _BASE_FROM_DIVIDER,
+    _BIG_OHM,
+    _CHANNEL_ERROR,
+    _CHANNEL_OK,
+    _CHANNEL_OPEN,
+    _CHANNEL_SHORT,
+    _CHANNEL_STALE,
+    _FINAL_STATUS,
+    _FORCE_INVALID,
+    _TINY_OHM,
+    _adc_tables,
+)
 
 FloatArray = NDArray[np.float64]
 StatusArray = NDArray[np.int8]
-
-
-# plain ints: numpy compares these without probing an enum member's attributes (hot path)
-_CHANNEL_ERROR = int(ChannelStatus.ERROR)
-_CHANNEL_NO_CONTACT = int(ChannelStatus.NO_CONTACT)
-_CHANNEL_OK = int(ChannelStatus.OK)
-_CHANNEL_OPEN = int(ChannelStatus.OPEN)
-_CHANNEL_SATURATED = int(ChannelStatus.SATURATED)
-_CHANNEL_SHORT = int(ChannelStatus.SHORT)
-_CHANNEL_STALE = int(ChannelStatus.STALE)
-_DIVIDER_INVALID = int(DividerStatus.INVALID)
-_DIVIDER_OPEN = int(DividerStatus.OPEN)
-_DIVIDER_SHORT = int(DividerStatus.SHORT)
-_DIVIDER_SATURATED = int(DividerStatus.SATURATED)
-_FORCE_INVALID = int(ForceStatus.INVALID)
-_FORCE_NO_CONTACT = int(ForceStatus.NO_CONTACT)
-_FORCE_OK = int(ForceStatus.OK)
-_FORCE_SATURATED = int(ForceStatus.SATURATED)
-
-
-def _final_status_table() -> NDArray[np.int8]:
-    """Channel status by 8 * base status + 2 * model status + device saturated bit.
-
-    A base status other than OK (open, short, error from the registers) stands; on a usable
-    channel the model's verdict decides, and the device's saturated bit only turns a force
-    inside the range into saturated (at the bottom rail the model already reads no contact).
-    """
-    table = np.empty(8 * len(ChannelStatus), dtype=np.int8)
-    by_model = {
-        _FORCE_OK: _CHANNEL_OK,
-        _FORCE_NO_CONTACT: _CHANNEL_NO_CONTACT,
-        _FORCE_SATURATED: _CHANNEL_SATURATED,
-        _FORCE_INVALID: _CHANNEL_ERROR,
-    }
-    for base in ChannelStatus:
-        for model_status, channel_status in by_model.items():
-            for device_saturated in (0, 1):
-                value = int(base)
-                if base == ChannelStatus.OK:
-                    value = channel_status
-                    if device_saturated and model_status == _FORCE_OK:
-                        value = _CHANNEL_SATURATED
-                table[8 * int(base) + 2 * model_status + device_saturated] = value
-    table.setflags(write=False)
-    return table
-
-
-_FINAL_STATUS = _final_status_table()
-
-
-def _base_status(divider_status: int, open_bit: int, short_bit: int) -> int:
-    if open_bit:
-        return _CHANNEL_OPEN
-    if short_bit:
-        return _CHANNEL_SHORT
-    if divider_status == _DIVIDER_SATURATED:
-        return _CHANNEL_SATURATED
-    return _CHANNEL_ERROR if divider_status == _DIVIDER_INVALID else _CHANNEL_OK
-
-
-#: Base status of an ADC channel by 4 * divider status + 2 * open bit + short bit (with bitmaps).
-_BASE_FROM_BITMAPS = frozen_copy(
-    np.array(
-        [_base_status(d, o, sh) for d in range(len(DividerStatus)) for o in (0, 1) for sh in (0, 1)],
-        dtype=np.int8,
-    )
-)
-#: What a rail reads as when the device's bitmaps say the channel is not faulty (ohm).
-_BIG_OHM = float(np.finfo(np.float64).max)
-_TINY_OHM = float(np.finfo(np.float64).tiny)
-
-
-@dataclass(frozen=True, eq=False)
-class AdcTables:
-    """Per 16-bit register value: the resistance to report (NaN for none: open or
-    invalid), the resistance the model gets with and without fault bitmaps, and the
-    ``DividerStatus`` (arrays of 65536, read-only)."""
-
-    report_ohm: FloatArray
-    model_ohm: FloatArray
-    model_with_bitmaps_ohm: FloatArray
-    status: NDArray[np.int8]
-
-
-@functools.lru_cache(maxsize=16)
-def _adc_tables(divider: FrontEnd) -> AdcTables:
-    """Lookup tables of a divider, shared by every device that has it (about 2 MB)."""
-    r, status = divider.resistance(np.arange(0x10000, dtype=np.int64))
-    return AdcTables(
-        report_ohm=frozen_copy(np.where(r == np.inf, np.nan, r)),
-        model_ohm=frozen_copy(r),
-        model_with_bitmaps_ohm=frozen_copy(np.minimum(np.maximum(r, _TINY_OHM), _BIG_OHM)),
-        status=frozen_copy(status),
-    )
-
-
-#: Base status of an ADC channel by divider status (no bitmaps: the rails are faults; an
-#: ADC rail that is not the circuit's open or short level is a reading beyond the range).
-_BASE_FROM_DIVIDER = frozen_copy(
-    np.array([_CHANNEL_OK, _CHANNEL_OPEN, _CHANNEL_SHORT, _CHANNEL_ERROR, _CHANNEL_SATURATED], dtype=np.int8)
-)
-
-
-#: A device clock that has not advanced for this long (host seconds, at least three of
-#: its ticks) while polls succeed is stuck: the host clock takes over.
-CLOCK_STUCK_AFTER_S = 2.0
-#: A wrapping (16/32-bit) clock that steps more than this many times the host's step
-#: (plus one second) has jumped, not wrapped.
-CLOCK_JUMP_FACTOR = 10.0
-#: After this many backward jumps the device clock is not trusted any more.
-CLOCK_MAX_BACKWARD_JUMPS = 3
-
-
-@dataclass(frozen=True)
-class ClockHealth:
-    """What the conversion has seen of a device clock: the last counter value, the host
-    time at which it last advanced, faults by kind, and whether the host clock took over
-    for good (``fallback``)."""
-
-    last_ticks: int | None = None
-    advanced_host_time_s: float | None = None
-    stuck: int = 0
-    backwards: int = 0
-    fallback: str | None = None  # why the host clock took over: "stuck", "backwards"
 
 
 @dataclass(frozen=True)
@@ -189,7 +79,7 @@ class DeviceState:
     last_host_time_s: float | None = None
     time_from_device: bool = False
     last: DeviceSnapshot | None = None
-    clock: ClockHealth = ClockHealth()
+    clock: ClockHealth = NO_CLOCK_HISTORY
 
 
 def state_arrays(state: ModelState) -> list[FloatArray]:
@@ -273,44 +163,17 @@ class DeviceProcessor:
         every = np.array_equal(self.index, np.arange(device.n_channels))
         self._pick: slice | NDArray[np.int64] = slice(None) if every else self.index
         self._no_values = frozen_copy(np.full(len(chans), np.nan))
-        self._baseline = self._baseline_correction()
-
-    def _baseline_correction(self) -> tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray] | None:
-        """Channels with an unloaded baseline: (positions, excess conductance S, the model's
-        unloaded conductance S and resistance ohm).
-
-        A channel that reads ``R_b`` unloaded where the model expects ``R_0 = R(0 N)`` has a
-        parallel path of conductance ``1/R_b - 1/R_0`` (board leakage, a preloaded cell, an
-        amplifier offset seen as one). It is taken off every reading, so a reading at the
-        baseline is the model's unloaded sensor: 0 N, no contact.
-        """
-        positions = [k for k, c in enumerate(self.channels) if c.baseline_ohm is not None]
-        if not positions:
-            return None
-        r0 = np.full(len(self.channels), np.inf)
+        r0 = np.full(len(chans), np.inf)
         for ks, model in self.groups:
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
                 r0[ks] = model.resistance(np.zeros(len(ks)))
         if self.conversions is not None:  # a line's or lookup's unloaded end (its lower force bound)
             r0[self.conversions.positions] = self.conversions.unloaded_ohm
-        pos = np.array(positions, dtype=np.intp)
-        baseline = np.array([self.channels[k].baseline_ohm for k in positions], dtype=np.float64)
-        g0 = np.where(np.isinf(r0[pos]), 0.0, 1.0 / r0[pos])
-        with np.errstate(divide="ignore"):
-            excess = np.where(np.isinf(baseline), 0.0, 1.0 / baseline) - g0
-        return pos, frozen_copy(excess), frozen_copy(g0), frozen_copy(r0[pos])
+        self._baseline = BaselineCorrection.of([c.baseline_ohm for c in chans], r0)
 
     def _tare(self, r_model: FloatArray) -> FloatArray:
         """``r_model`` with each baseline channel's excess conductance taken off."""
-        if self._baseline is None:
-            return r_model
-        pos, excess, g0, r0 = self._baseline
-        r = np.array(r_model, dtype=np.float64, copy=True)
-        measured = r[pos]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            g = 1.0 / measured - excess
-            r[pos] = np.where(np.isnan(measured), np.nan, np.where(g > g0, 1.0 / g, r0))
-        return r
+        return r_model if self._baseline is None else self._baseline.apply(r_model)
 
     @property
     def name(self) -> str:
@@ -403,48 +266,17 @@ class DeviceProcessor:
     def _dt(
         self, state: DeviceState, raw: RawSample, host_time_s: float
     ) -> tuple[float, float, bool, ClockHealth]:
-        """Seconds since the previous sample, the time to remember, whether it came from the
-        device clock, and the clock's health.
-
-        The device clock is used while it behaves. A counter that does not advance for
-        ``CLOCK_STUCK_AFTER_S`` while polls succeed is stuck (a register that is not a clock,
-        a frozen firmware): the host clock takes over for good, and the step covers the host
-        time since the counter last advanced, so the creep lost meanwhile is made up. A
-        counter that goes back (a restart) or, for a 16/32-bit counter, steps implausibly
-        far, costs that one step the host clock; after ``CLOCK_MAX_BACKWARD_JUMPS`` of them
-        the host clock takes over for good.
-        """
-        health = state.clock
-        host_dt = host_time_s - state.last_host_time_s if state.last_host_time_s is not None else 0.0
-        host_dt = max(0.0, host_dt)
-        clock = self.device.registers.clock
-        if raw.device_time_s is None or clock is None or health.fallback is not None:
-            return (host_dt if state.last_time_s is not None else 0.0), host_time_s, False, health
-        ticks = raw.device_ticks if raw.device_ticks is not None else round(raw.device_time_s / clock.tick_s)
-        if health.last_ticks is None or not state.time_from_device or state.last_time_s is None:
-            first = ClockHealth(ticks, host_time_s, health.stuck, health.backwards)
-            return (host_dt if state.last_time_s is not None else 0.0), raw.device_time_s, True, first
-        delta = ticks - health.last_ticks
-        if clock.registers < 4:
-            delta %= clock.modulus
-        step_s = delta * clock.tick_s
-        backwards = delta < 0 or (
-            clock.registers < 4 and step_s > CLOCK_JUMP_FACTOR * host_dt + 1.0 and step_s > 2 * clock.tick_s
+        """Seconds since the previous sample (see ``clock.time_step``)."""
+        return time_step(
+            self.device.registers.clock,
+            state.clock,
+            raw.device_time_s,
+            raw.device_ticks,
+            state.last_time_s,
+            state.last_host_time_s,
+            state.time_from_device,
+            host_time_s,
         )
-        if backwards:
-            n = health.backwards + 1
-            fallback = "backwards" if n >= CLOCK_MAX_BACKWARD_JUMPS else None
-            new = ClockHealth(ticks, host_time_s, health.stuck, n, fallback)
-            return host_dt, (host_time_s if fallback else raw.device_time_s), fallback is None, new
-        if delta == 0:
-            advanced = health.advanced_host_time_s
-            since = host_time_s - (advanced if advanced is not None else host_time_s)
-            if since > max(CLOCK_STUCK_AFTER_S, 3.0 * clock.tick_s):
-                new = ClockHealth(ticks, advanced, health.stuck + 1, health.backwards, "stuck")
-                return max(0.0, since), host_time_s, False, new
-            return 0.0, raw.device_time_s, True, replace(health, last_ticks=ticks)
-        new = ClockHealth(ticks, host_time_s, health.stuck, health.backwards)
-        return step_s, raw.device_time_s, True, new
 
     def process(
         self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float

@@ -28,9 +28,8 @@ from gateway.model import (
     SensorModel,
     SensorParams,
 )
+from gateway.runtime.clock import CLOCK_MAX_BACKWARD_JUMPS, CLOCK_STUCK_AFTER_S
 from gateway.runtime.processor import (
-    CLOCK_MAX_BACKWARD_JUMPS,
-    CLOCK_STUCK_AFTER_S,
     DeviceProcessor,
     DeviceState,
     state_arrays,

@@ -439,7 +439,7 @@ def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
 def test_register_lookup_tables_give_eq_18_by_hand(bits: int, hand: dict[int, float]) -> None:
     """Counts read from registers (uint16) are converted by lookup: the rails, a few counts
     worked by hand, register values above full scale invalid, and r falling with counts."""
-    from gateway.runtime.processor import _adc_tables
+    from gateway.runtime.status_tables import _adc_tables
 
     full_scale = 2**bits - 1
     tables = _adc_tables(Divider(5.0, 4.7e3, bits))
