@@ -342,7 +342,13 @@ class DeviceProcessor:
             reference = read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
         q = array_quantities(force, status, self.x_mm, self.y_mm, self.device.layout.cell_area_mm2)
         wall_time_s = tracked.wall_time_s
-        inputs = (self.groups, read_only(tracked.model_resistance_ohm), temperature, read_only(valued))
+        inputs = (
+            self.groups,
+            read_only(tracked.model_resistance_ohm),
+            temperature,
+            read_only(valued),
+            read_only(force),
+        )
         static = (
             StaticEstimate(*inputs)
             if self.conversions is None
