@@ -28,6 +28,7 @@ from ..config.editor import (
     read_config_text,
 )
 from ..errors import ConfigError
+from ..metrics.web_config import load_web_config
 from ..modbus.plan import MERGE_GAP, device_plan
 from ..model import parameter_names
 from .common import config_option
@@ -163,6 +164,12 @@ def check_config(config_path: Path) -> None:
     status is 2.
     """
     _, config = _load(config_path)
+    if config.metrics.web_config is not None:
+        # what `run` loads, the same way (TLS key and certificate into an SSL context included)
+        try:
+            load_web_config(config.metrics.web_config)
+        except ConfigError as exc:
+            _fail(str(exc))
     n_devices = sum(len(b.devices) for b in config.buses)
     n_channels = sum(d.n_channels for b in config.buses for d in b.devices)
     click.echo(

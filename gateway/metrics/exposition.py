@@ -27,6 +27,7 @@ from .collector import SnapshotCollector
 
 __all__ = ["SnapshotExposition"]
 
+
 def _label(value: str) -> str:
     """A label value escaped as the text format wants it: backslash, newline, double quote."""
     return value.replace("\\", "\\\\").replace("\n", "\\n").replace('"', '\\"')

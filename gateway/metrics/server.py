@@ -11,6 +11,15 @@ loop and sent as ``prometheus_client.generate_latest`` gives it, byte for byte.
 
 An ``install`` callable (``gateway.web.WebPage.install``) adds routes to the application,
 e.g. the live pressure-map page; without one ``/`` is a link to ``/metrics``.
+
+Hostile or clumsy clients are bounded: at most ``max_connections`` connections are served at
+once (beyond that a connection gets a 503 and is closed; a warning is logged once when the
+limit is reached, and a line when it is left); a connection that has not sent a complete
+request head within ``header_timeout_s`` (and an idle keep-alive connection after as long) is
+closed, and so is a TLS handshake not done by then. Connections cost no threads: the server
+has one thread for its loop, two workers (``/metrics``, the page's blocking work) and one
+for bcrypt, so a flood of wrong passwords keeps at most one core busy and queues; a scraper
+whose credentials were verified before is answered without waiting for that queue.
 """
 
 from __future__ import annotations
@@ -21,6 +30,7 @@ import logging
 import socket
 import threading
 from collections.abc import Awaitable, Callable
+from concurrent.futures import ThreadPoolExecutor
 
 from aiohttp import web
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
@@ -36,10 +46,78 @@ _TEXT = "text/plain; charset=utf-8"
 _INDEX = b'<html><body><h1>tactile-gateway</h1><a href="/metrics">metrics</a></body></html>\n'
 #: how long a stop waits for open responses (long-lived streams are ended first)
 SHUTDOWN_TIMEOUT_S = 2.0
+#: connections served at once (well under the usual 1024 open files); more get a 503 and are closed
+MAX_CONNECTIONS = 512
+#: a request head (or a TLS handshake) must arrive within this; idle keep-alive is closed after it
+HEADER_TIMEOUT_S = 10.0
+#: worker threads of the server's loop (``/metrics`` bodies, blocking work of the page)
+WORKERS = 2
+#: how long a refused connection is drained before it is closed
+_REFUSED_LINGER_S = 1.0
+_BUSY = (
+    b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: text/plain; charset=utf-8\r\n"
+    b"Content-Length: 21\r\nRetry-After: 5\r\nConnection: close\r\nServer: tactile-gateway\r\n\r\n"
+    b"too many connections\n"
+)
 
 
 def _text(status: int, body: bytes, extra: dict[str, str] | None = None) -> web.Response:
     return web.Response(status=status, body=body, headers={"Content-Type": _TEXT, **(extra or {})})
+
+
+class _Limited(asyncio.Protocol):
+    """One connection: handed to aiohttp's protocol if the server admits it; else a 503, the
+    write side shut and what the client sends discarded (closing with unread data would reset
+    the connection before the client reads the 503) for at most ``_REFUSED_LINGER_S``."""
+
+    __slots__ = ("_factory", "_inner", "_linger", "_owner")
+
+    def __init__(self, owner: MetricsServer, factory: Callable[[], asyncio.Protocol]) -> None:
+        self._owner = owner
+        self._factory = factory
+        self._inner: asyncio.Protocol | None = None
+        self._linger: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        if not self._owner._admit():
+            assert isinstance(transport, asyncio.WriteTransport)
+            try:
+                transport.write(_BUSY)
+                if transport.can_write_eof():
+                    transport.write_eof()
+                    self._linger = asyncio.get_running_loop().call_later(_REFUSED_LINGER_S, transport.close)
+                else:
+                    transport.close()
+            except Exception:  # the client is gone already
+                transport.abort()
+            return
+        self._inner = self._factory()
+        self._inner.connection_made(transport)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._linger is not None:
+            self._linger.cancel()
+            self._linger = None
+        inner, self._inner = self._inner, None
+        if inner is not None:
+            self._owner._release()
+            inner.connection_lost(exc)
+
+    def data_received(self, data: bytes) -> None:
+        if self._inner is not None:
+            self._inner.data_received(data)
+
+    def eof_received(self) -> bool | None:
+        # refused: False closes the transport
+        return self._inner.eof_received() if self._inner is not None else False
+
+    def pause_writing(self) -> None:
+        if self._inner is not None:
+            self._inner.pause_writing()
+
+    def resume_writing(self) -> None:
+        if self._inner is not None:
+            self._inner.resume_writing()
 
 
 class MetricsServer:
@@ -52,8 +130,16 @@ class MetricsServer:
         port: int = 9830,
         web_config: WebConfig | None = None,
         install: Install | None = None,
+        *,
+        max_connections: int = MAX_CONNECTIONS,
+        header_timeout_s: float = HEADER_TIMEOUT_S,
     ) -> None:
         self.registry = registry
+        self.max_connections = max_connections
+        self.header_timeout_s = header_timeout_s
+        self._open = 0  # admitted connections (touched on the server's loop only)
+        self._refused = 0
+        self._at_limit = False
         self.web_config = web_config or WebConfig()
         self._auth = BasicAuth(self.web_config.basic_auth_users) if self.web_config.basic_auth_users else None
         self._install = install
@@ -73,6 +159,12 @@ class MetricsServer:
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping: asyncio.Event | None = None
+        self._auth_pool: ThreadPoolExecutor | None = None
+
+    @property
+    def open_connections(self) -> int:
+        """Connections being served now."""
+        return self._open
 
     @property
     def host(self) -> str:
@@ -114,8 +206,15 @@ class MetricsServer:
         """Basic auth on every path; our plain 404 and 405 for paths we do not serve."""
         if self._auth is not None:
             header = request.headers.get("Authorization")
-            # bcrypt costs milliseconds: checked off the loop (verified pairs are cached)
-            ok = await asyncio.get_running_loop().run_in_executor(None, self._auth.check, header)
+            # a verified pair is cached (cheap); bcrypt costs up to ~0.3 s: one thread of its own
+            ok = self._auth.cached(header)
+            if not ok:
+                try:
+                    loop = asyncio.get_running_loop()
+                    ok = await loop.run_in_executor(self._auth_pool, self._auth.check, header)
+                except Exception as exc:  # never expected; a client must not be able to fill the log
+                    log.debug("basic auth check failed: %r", exc)
+                    ok = False
             if not ok:
                 return _text(401, b"Unauthorized\n", {"WWW-Authenticate": 'Basic realm="tactile-gateway"'})
         if request.method not in ("GET", "HEAD"):
@@ -143,33 +242,77 @@ class MetricsServer:
     async def _index(self, request: web.Request) -> web.Response:
         return web.Response(body=_INDEX, headers={"Content-Type": "text/html; charset=utf-8"})
 
+    # ------------------------------------------------------------------ connections
+    def _admit(self) -> bool:
+        if self._open >= self.max_connections:
+            self._refused += 1
+            if not self._at_limit:
+                self._at_limit = True
+                log.warning(
+                    "metrics server: %d connections open, the limit; refusing new ones (503) until "
+                    "some close (a client that sends no request for %g s is closed)",
+                    self._open,
+                    self.header_timeout_s,
+                )
+            return False
+        self._open += 1
+        return True
+
+    def _release(self) -> None:
+        self._open -= 1
+        if self._at_limit and self._open <= self.max_connections // 2:
+            self._at_limit = False
+            log.info(
+                "metrics server: %d connections open, accepting again (%d refused at the limit)",
+                self._open,
+                self._refused,
+            )
+            self._refused = 0
+
     # ------------------------------------------------------------------ the thread
     async def _serve(self, ready: threading.Event, failure: list[BaseException]) -> None:
         self._stopping = asyncio.Event()
+        # keepalive_timeout: aiohttp closes a connection waiting for a (complete) request head
+        # that long after it opened or after its last response
         runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
-                               shutdown_timeout=SHUTDOWN_TIMEOUT_S)  # fmt: skip
+                               shutdown_timeout=SHUTDOWN_TIMEOUT_S,
+                               keepalive_timeout=self.header_timeout_s)  # fmt: skip
+        listener: asyncio.AbstractServer | None = None
         try:
             await runner.setup()
-            site = web.SockSite(runner, self._sock, ssl_context=self._ssl)
-            await site.start()
+            factory = runner.server
+            assert factory is not None
+            listener = await asyncio.get_running_loop().create_server(
+                lambda: _Limited(self, factory),
+                sock=self._sock,
+                backlog=128,
+                ssl=self._ssl,
+                ssl_handshake_timeout=self.header_timeout_s if self._ssl is not None else None,
+            )
         except BaseException as exc:
             failure.append(exc)
             ready.set()
+            if listener is not None:
+                listener.close()
             await runner.cleanup()
             return
         ready.set()
         try:
             await self._stopping.wait()
         finally:
+            listener.close()
             await runner.cleanup()
 
     def _run(self, ready: threading.Event, failure: list[BaseException]) -> None:
         loop = self._loop
         assert loop is not None
+        loop.set_default_executor(ThreadPoolExecutor(WORKERS, thread_name_prefix="tactile-metrics-worker"))
+        self._auth_pool = ThreadPoolExecutor(1, thread_name_prefix="tactile-metrics-auth")
         try:
             loop.run_until_complete(self._serve(ready, failure))
             loop.run_until_complete(loop.shutdown_default_executor())
         finally:
+            self._auth_pool.shutdown(wait=True, cancel_futures=True)
             loop.close()
 
     def start(self) -> MetricsServer:

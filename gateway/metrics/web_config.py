@@ -13,8 +13,13 @@ A YAML file in the Prometheus exporter-toolkit format (the subset the gateway su
     http_server_config:
       headers: {X-Frame-Options: deny}
 
-``load_web_config`` validates it (``ConfigError`` naming the file and key); ``BasicAuth``
-checks an ``Authorization`` header against the bcrypt hashes (a verified pair is cached).
+``load_web_config`` validates it (``ConfigError`` naming the file and key), as ``run`` and
+``check-config`` both use it: the TLS key must be private to its owner (like web.yml) and
+every hash must be a bcrypt hash that bcrypt accepts. ``BasicAuth`` checks an
+``Authorization`` header against the bcrypt hashes (a verified pair is cached). An unknown
+user costs one bcrypt check at the highest cost of the configured hashes, as a wrong password
+for a real one does; passwords are cut to bcrypt's 72 bytes, as Go's bcrypt (exporter-toolkit)
+and bcrypt before 5.0 do, so any length gets a plain "no".
 """
 
 from __future__ import annotations
@@ -23,7 +28,9 @@ import base64
 import binascii
 import hashlib
 import hmac
+import re
 import ssl
+import stat
 import threading
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -43,6 +50,15 @@ _CLIENT_AUTH = {
     "RequireAndVerifyClientCert": ssl.CERT_REQUIRED,
 }
 _TLS_VERSIONS = {"TLS12": ssl.TLSVersion.TLSv1_2, "TLS13": ssl.TLSVersion.TLSv1_3}
+#: $2a$/$2b$/$2y$, a two-digit cost, 22 characters of salt and 31 of hash (bcrypt's base64)
+_BCRYPT_HASH = re.compile(r"\$2[aby]\$(\d\d)\$[./A-Za-z0-9]{53}")
+#: bcrypt uses the first 72 bytes of a password; the rest never counted
+BCRYPT_MAX_PASSWORD_BYTES = 72
+
+
+def bcrypt_cost(hashed: bytes) -> int:
+    """The cost (log2 rounds) of a bcrypt hash that ``load_web_config`` accepted."""
+    return int(hashed[4:6])
 
 
 @dataclass(frozen=True)
@@ -84,6 +100,48 @@ def _check_keys(path: Path, where: str, table: Mapping[str, Any], allowed: Itera
             raise _web_error(
                 path, f"{where}.{key}" if where else str(key), f"unknown key; allowed: {', '.join(allowed)}"
             )
+
+
+def _check_private_key(path: Path, key: Path) -> None:
+    """Refuse a TLS private key that users other than its owner can access (as web.yml)."""
+    try:
+        mode = stat.S_IMODE(key.stat().st_mode)
+    except OSError as exc:
+        where, why = "tls_server_config.key_file", exc.strerror or exc
+        raise _web_error(path, where, f"cannot access {key}: {why}") from None
+    if mode & 0o077:
+        raise _web_error(
+            path,
+            "tls_server_config.key_file",
+            f"{key} holds the TLS private key but is accessible to other users (mode {mode:04o}; allowed: "
+            f"no group/other permissions, e.g. 0600): run `chmod 600 {key}`",
+        )
+
+
+def _check_hash(path: Path, user: str, hashed: object) -> bytes:
+    """A bcrypt hash that bcrypt will accept at login (never echoed: it is a secret)."""
+    where = f"basic_auth_users.{user}"
+    hint = "e.g. from `htpasswd -nBC 10 \"\" | tr -d ':'`"
+    if not isinstance(hashed, str) or not hashed.startswith(("$2a$", "$2b$", "$2y$")):
+        raise _web_error(path, where, f"expected a bcrypt hash ($2a$/$2b$/$2y$...) for user {user!r}, {hint}")
+    if _BCRYPT_HASH.fullmatch(hashed) is None:
+        raise _web_error(
+            path,
+            where,
+            f"malformed bcrypt hash for user {user!r} (expected $2y$<2-digit cost>$ and 53 characters "
+            f"of salt and hash; every login would fail), {hint}",
+        )
+    cost = int(hashed[4:6])
+    if not 4 <= cost <= 31:
+        raise _web_error(path, where, f"bcrypt cost {cost} for user {user!r} is out of range (4..31)")
+    # the same salt at the lowest cost: does bcrypt accept it (salt bits)? ~1 ms, not a login
+    try:
+        bcrypt.checkpw(b"", f"$2b$04${hashed[7:]}".encode())
+    except ValueError:
+        raise _web_error(
+            path, where, f"malformed bcrypt hash for user {user!r} (bcrypt refuses its salt), {hint}"
+        ) from None
+    return hashed.encode()
 
 
 def load_web_config(path: Path) -> WebConfig:
@@ -130,6 +188,7 @@ def load_web_config(path: Path) -> WebConfig:
         client_ca = file_key(tls, "tls_server_config", "client_ca_file")
         if cert is None or key is None:
             raise _web_error(path, "tls_server_config", "cert_file and key_file are both required")
+        _check_private_key(path, key)
         auth_type = str(tls.get("client_auth_type", "NoClientCert"))
         if auth_type not in _CLIENT_AUTH:
             raise _web_error(
@@ -150,11 +209,7 @@ def load_web_config(path: Path) -> WebConfig:
         if not isinstance(raw_users, dict):
             raise _web_error(path, "basic_auth_users", "expected a mapping of user: bcrypt hash")
         for user, hashed in raw_users.items():
-            if not isinstance(hashed, str) or not hashed.startswith(("$2a$", "$2b$", "$2y$")):
-                raise _web_error(
-                    path, f"basic_auth_users.{user}", "expected a bcrypt hash ($2a$/$2b$/$2y$...)"
-                )
-            users[str(user)] = hashed.encode()
+            users[str(user)] = _check_hash(path, str(user), hashed)
     headers: dict[str, str] = {}
     http = data.get("http_server_config")
     if http is not None:
@@ -175,38 +230,70 @@ def load_web_config(path: Path) -> WebConfig:
 
 class BasicAuth:
     """Checks ``Authorization: Basic`` against bcrypt hashes; remembers verified pairs so
-    that a scrape every few seconds does not pay a bcrypt check each time."""
+    that a scrape every few seconds does not pay a bcrypt check each time.
 
-    _DUMMY = bcrypt.hashpw(b"not a password", bcrypt.gensalt(rounds=4))
+    ``cached`` is the cheap part (no bcrypt), for the event loop; ``check`` may run bcrypt.
+    An unknown user is checked against a dummy hash at the highest cost of the configured
+    ones, so that its answer takes as long as a wrong password for a real user. Passwords are
+    cut to 72 bytes (bcrypt never used more; bcrypt 5 raises on longer ones).
+    """
 
     def __init__(self, users: Mapping[str, bytes]) -> None:
         self._users = dict(users)
         self._verified: set[bytes] = set()
         self._lock = threading.Lock()
+        #: the cost of the dummy hash: that of the dearest configured hash
+        self.dummy_cost = max((bcrypt_cost(h) for h in self._users.values()), default=4)
+        # a salt at that cost and a hash no password gives (bcrypt only recomputes and compares)
+        self._dummy = bcrypt.gensalt(rounds=self.dummy_cost) + b"." * 31
+
+    @staticmethod
+    def _credentials(header: str | None) -> tuple[str, bytes] | None:
+        if not header or not header.startswith("Basic "):
+            return None
+        try:
+            decoded = base64.b64decode(header[6:].strip(), validate=True)
+            user_bytes, sep, password = decoded.partition(b":")
+            user = user_bytes.decode("utf-8")
+        except (binascii.Error, UnicodeDecodeError):
+            return None
+        if not sep:
+            return None
+        return user, password
+
+    def _key(self, user: str, password: bytes, hashed: bytes) -> bytes:
+        return hashlib.sha256(b"%s\0%s\0%s" % (user.encode(), password, hashed)).digest()
+
+    def cached(self, header: str | None) -> bool:
+        """True if this user:password pair was verified before (no bcrypt: cheap)."""
+        creds = self._credentials(header)
+        if creds is None:
+            return False
+        hashed = self._users.get(creds[0])
+        if hashed is None:
+            return False
+        key = self._key(creds[0], creds[1], hashed)
+        with self._lock:
+            return any(hmac.compare_digest(key, k) for k in self._verified)
 
     def check(self, header: str | None) -> bool:
-        if not header or not header.startswith("Basic "):
+        """Whether the header carries a configured user and its password (may run bcrypt)."""
+        creds = self._credentials(header)
+        if creds is None:
             return False
-        try:
-            decoded = base64.b64decode(header[6:].strip(), validate=True).decode("utf-8")
-        except (binascii.Error, UnicodeDecodeError):
-            return False
-        user, sep, password = decoded.partition(":")
-        if not sep:
-            return False
+        user, password = creds
+        if self.cached(header):
+            return True
         hashed = self._users.get(user)
-        key = hashlib.sha256(b"%s\0%s\0%s" % (user.encode(), password.encode(), hashed or b"")).digest()
-        with self._lock:
-            if hashed is not None and any(hmac.compare_digest(key, k) for k in self._verified):
-                return True
-        if hashed is None:
-            bcrypt.checkpw(password.encode(), self._DUMMY)  # same cost for unknown users
-            return False
+        secret = password[:BCRYPT_MAX_PASSWORD_BYTES]
         try:
-            ok = bcrypt.checkpw(password.encode(), hashed)
-        except ValueError:
+            if hashed is None:
+                bcrypt.checkpw(secret, self._dummy)  # as dear as a real user's check
+                return False
+            ok = bcrypt.checkpw(secret, hashed)
+        except ValueError:  # not expected: hashes are checked at load, passwords cut to 72 bytes
             return False
         if ok:
             with self._lock:
-                self._verified.add(key)
+                self._verified.add(self._key(user, password, hashed))
         return ok
