@@ -35,7 +35,7 @@ from ..config import (
     load_config,
 )
 from ..errors import ConfigError
-from ..metrics.collector import make_registry
+from ..metrics.exposition import SnapshotRegistry
 from ..metrics.server import MetricsServer
 from ..metrics.web_config import WebConfig, load_web_config
 from ..model import Divider
@@ -89,7 +89,7 @@ def _page(holder: SnapshotHolder, config: GatewayConfig, enabled: bool = True) -
 async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None, page_on: bool = True) -> int:
     """Poll and serve until SIGTERM/SIGINT; SIGHUP reloads ``config_path``."""
     holder = SnapshotHolder()
-    registry = make_registry(holder.get, CollectorRegistry(auto_describe=False))
+    registry = SnapshotRegistry(holder.get)
     page = _page(holder, config, page_on)
     install = page.install if page is not None else None
     try:
@@ -327,7 +327,7 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
             )
             config = gateway_config_for([bus], host, port)
             holder = SnapshotHolder()
-            registry = make_registry(holder.get, CollectorRegistry(auto_describe=False))
+            registry = SnapshotRegistry(holder.get)
             try:
                 server = MetricsServer(
                     registry, host, port, install=WebPage(FrameHub(holder)).install

@@ -16,16 +16,19 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from functools import lru_cache
 
+from prometheus_client import CollectorRegistry, generate_latest
+from prometheus_client.metrics_core import Metric
+from prometheus_client.registry import Collector
 from prometheus_client.utils import floatToGoString
 
 from ..runtime.counters import READ_ERROR_REASONS
 from ..runtime.snapshot import STATUS_LABELS, ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from .collector import SnapshotCollector
 
-__all__ = ["SnapshotExposition"]
+__all__ = ["SnapshotExposition", "SnapshotRegistry", "render"]
 
 
 def _label(value: str) -> str:
@@ -189,3 +192,44 @@ def _device_lines(
         *up, *last_ok, *duration, *interval, *reads, *errors, *total, *cop, *area, *in_contact,
         *clock_host, *clock_faults,
     ]  # fmt: skip
+
+
+class SnapshotRegistry(CollectorRegistry):
+    """A registry holding the snapshot collector (for anything that walks collectors) whose
+    ``render`` writes the snapshot's families directly (``SnapshotExposition``) and the other
+    collectors registered into it (e.g. MQTT counters) through the client library."""
+
+    def __init__(self, source: Callable[[], GatewaySnapshot]) -> None:
+        super().__init__(auto_describe=False)
+        self._snapshot_collector = SnapshotCollector(source)
+        self.register(self._snapshot_collector)
+        self._exposition = SnapshotExposition(source)
+        self._others: list[Collector] = []
+
+    def register(self, collector: Collector) -> None:
+        super().register(collector)
+        if collector is not getattr(self, "_snapshot_collector", None):
+            self._others.append(collector)
+
+    def unregister(self, collector: Collector) -> None:
+        super().unregister(collector)
+        if collector in self._others:
+            self._others.remove(collector)
+
+    def render(self) -> bytes:
+        """The whole exposition: the snapshot's families, then the other collectors'."""
+        body = self._exposition()
+        if not self._others:
+            return body
+        return body + generate_latest(_Collectors(tuple(self._others)))
+
+
+class _Collectors:
+    """Just enough of a registry for ``generate_latest``: the families of some collectors."""
+
+    def __init__(self, collectors: tuple[Collector, ...]) -> None:
+        self._collectors = collectors
+
+    def collect(self) -> Iterable[Metric]:
+        for collector in self._collectors:
+            yield from collector.collect()

@@ -233,7 +233,12 @@ class MetricsServer:
 
     async def _metrics(self, request: web.Request) -> web.Response:
         try:
-            body = await asyncio.get_running_loop().run_in_executor(None, generate_latest, self.registry)
+            render = getattr(self.registry, "render", None)  # a SnapshotRegistry writes its own text
+            loop = asyncio.get_running_loop()
+            if render is not None:
+                body = await loop.run_in_executor(None, render)
+            else:
+                body = await loop.run_in_executor(None, generate_latest, self.registry)
         except Exception:
             log.exception("building the metrics failed")
             return _text(500, b"metrics collection failed\n")

@@ -95,3 +95,19 @@ def test_promtool_accepts_it(tmp_path: Path, seed: int) -> None:
             [promtool, "check", "metrics"], stdin=f, capture_output=True, text=True, timeout=60
         )
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_the_registry_renders_what_the_client_library_makes_of_it() -> None:
+    """The server sends ``SnapshotRegistry.render()``: the snapshot's families written
+    directly, then any other collector (here the MQTT counters) through the client library."""
+    from gateway.metrics.exposition import SnapshotRegistry
+    from gateway.mqtt.link import MqttLink
+
+    snap = _snapshot(7, 3, ["arr"])
+    registry = SnapshotRegistry(lambda: snap)
+    assert registry.render() == generate_latest(registry)
+    link = MqttLink(registry)
+    body = registry.render()
+    assert body == generate_latest(registry) and b"tactile_mqtt_connected 0.0" in body
+    registry.unregister(link)
+    assert registry.render() == generate_latest(registry) == _reference(snap)
