@@ -325,7 +325,7 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
             bus = bus_config_for(
                 "sim", "tcp", [device], host="127.0.0.1", port=sim.port, poll_interval_s=0.05
             )
-            config = gateway_config_for([bus], host, port)
+            config = gateway_config_for([bus])  # the demo serves on host:port itself (0: any port)
             holder = SnapshotHolder()
             registry = SnapshotRegistry(holder.get)
             try:
@@ -340,11 +340,19 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
                     t_end = None if duration_s is None else time.monotonic() + duration_s
                     if tty:
                         out.write("\x1b[?25l\x1b[2J")
+                    else:  # a log or a pipe: the addresses once, then a line every 5 s
+                        out.write(f"page on {server.page_url or '(off)'} - metrics on {server.url}\n")
+                        out.flush()
+                    next_line = time.monotonic() + 1.0
                     while not stop.is_set() and (t_end is None or time.monotonic() < t_end):
                         snap = holder.get().devices.get("demo")
-                        if snap is not None:
+                        if snap is not None and tty:
                             frame = render_view(snap, 4, server.url, color=tty, page_url=server.page_url)
-                            out.write(("\x1b[H" + frame + "\x1b[J") if tty else frame + "\n\n")
+                            out.write("\x1b[H" + frame + "\x1b[J")
+                            out.flush()
+                        elif snap is not None and time.monotonic() >= next_line:
+                            next_line += 5.0
+                            out.write(_summary_line(snap))
                             out.flush()
                         with contextlib.suppress(TimeoutError):
                             await asyncio.wait_for(stop.wait(), timeout=0.2)
@@ -357,6 +365,17 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
     return 0
+
+
+def _summary_line(snap: DeviceSnapshot) -> str:
+    """One line of a device's state, for a demo whose output is not a terminal."""
+    cop = snap.center_of_pressure_mm
+    where = "-" if cop is None else f"({cop[0]:.1f}, {cop[1]:.1f}) mm"
+    state = "up" if snap.up else "DOWN"
+    return (
+        f"{time.strftime('%H:%M:%S')} {snap.device} {state}: total {snap.total_force_n:.3f} N, "
+        f"{snap.channels_in_contact} channels in contact, centre of pressure {where}\n"
+    )
 
 
 @click.command("demo")

@@ -29,7 +29,17 @@ from ..model.params import PARAMETER_RANGES, ParameterError, SensorParams, param
 from .profiles import load_profile, merge_profile
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS, parse_baselines, parse_divider, parse_front_end, parse_layout
 from .schema import DEVICE_ID, MAX_CHANNELS, POSITION_MM, ChannelConfig, DeviceConfig
-from .tables import REQUIRED, Context, Table, join_key, parse_toml, show_value, suggest, type_name
+from .tables import (
+    REQUIRED,
+    Context,
+    Table,
+    join_key,
+    parse_toml,
+    read_text_file,
+    show_value,
+    suggest,
+    type_name,
+)
 from .wire import CHECK_KEYS, REGISTER_KEYS, check_overlaps, parse_checks, parse_clock, parse_registers
 
 __all__ = ["DEVICE_KEYS", "parse_device"]
@@ -151,12 +161,12 @@ def _load_calibration(
     """Per-channel parameter tables ``[channel.<name>]`` of a calibration file, the
     channels' unloaded baselines (``baseline_ohm`` in the same tables) and their line or
     lookup tables (``[line.<name>]``, ``[lookup.<name>]``)."""
+    if not file.exists():
+        raise ctx.error(path, f"{file} does not exist (calibration file)")
     try:
-        text = file.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ctx.error(path, f"{file} does not exist (calibration file)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ctx.error(path, f"cannot read calibration file {file}: {exc}") from None
+        text = read_text_file(file, "calibration file")
+    except ConfigError as exc:
+        raise ctx.error(path, str(exc)) from None
     cal_ctx = Context(file)
     note = f" (calibration file of {path} in {ctx.label})"
     try:

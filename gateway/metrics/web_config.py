@@ -144,16 +144,26 @@ def _check_hash(path: Path, user: str, hashed: object) -> bytes:
     return hashed.encode()
 
 
+def _one_line(exc: yaml.YAMLError) -> str:
+    """PyYAML's message (several lines with a source excerpt) as one line with its position."""
+    problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    mark = getattr(exc, "problem_mark", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return " ".join(f"{problem}{where}".split())
+
+
 def load_web_config(path: Path) -> WebConfig:
     """Parse and check a web-config YAML file (``ConfigError`` naming file and key)."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read web config: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): a web config is YAML text") from None
     try:
         data = yaml.safe_load(text) or {}
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {exc}") from None
+        raise ConfigError(f"{path}: invalid YAML: {_one_line(exc)}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level")
     _check_keys(path, "", data, ("tls_server_config", "basic_auth_users", "http_server_config"))

@@ -109,7 +109,8 @@ def decode_float32(registers: ArrayLike, word_order: Order = "big", byte_order: 
     register map uses +inf for an open sensor and 0 for a short).
     """
     bits = _combine(registers, 2, word_order, byte_order).astype(np.uint32)
-    return bits.view(np.float32).astype(np.float64)
+    with np.errstate(invalid="ignore"):  # a signalling NaN is a value here, not a warning
+        return bits.view(np.float32).astype(np.float64)
 
 
 def encode_float32(values: ArrayLike, word_order: Order = "big", byte_order: Order = "big") -> list[int]:

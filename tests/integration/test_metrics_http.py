@@ -320,6 +320,21 @@ async def test_demo_shows_the_array_and_serves_metrics() -> None:
             await proc.wait()
     assert proc.returncode == 0, err.decode()
     assert values.get(("tactile_device_up", (("device", "demo"),))) == 1.0
-    frames = out.decode()
-    assert "total force" in frames and "centre of pr." in frames
-    assert frames.count("total force") >= 5  # refreshed ~5 Hz over 3 s
+    lines = out.decode().splitlines()
+    # not a terminal: the addresses once and a line every 5 s, not a full frame 5 times a second
+    assert lines[0] == f"page on http://127.0.0.1:{port}/ - metrics on http://127.0.0.1:{port}/metrics"
+    assert 1 <= len(lines) <= 3 and "\x1b[" not in out.decode(), lines
+    assert all("demo up: total" in line and "channels in contact" in line for line in lines[1:]), lines
+
+
+def test_demo_refuses_a_bad_host_in_one_line_and_takes_any_port() -> None:
+    bad = subprocess.run(
+        [*GATEWAY, "demo", "--host", "a b", "--duration", "1"], capture_output=True, text=True, timeout=60
+    )
+    assert bad.returncode == 2 and "cannot serve metrics on a b:9830" in bad.stderr
+    assert "Traceback" not in bad.stderr
+    ok = subprocess.run(
+        [*GATEWAY, "demo", "--port", "0", "--duration", "1.5"], capture_output=True, text=True, timeout=60
+    )
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.startswith("page on http://127.0.0.1:") and "Traceback" not in ok.stderr
