@@ -183,9 +183,16 @@ async def test_a_broker_restart_loses_only_the_counted_frames(tmp_path: Path, br
                 # the subscriber's session must be on disk for a killed broker to bring it back
                 db = broker.folder / "mosquitto.db"
                 assert await until(db.exists, 10.0), "mosquitto never saved its database"
+                # the poll rate with the broker up (publishing) ...
+                start, t0 = len(exported.by_seq), time.monotonic()
+                assert await until(lambda: len(exported.by_seq) >= start + 40, 20.0)
+                rate_up = (len(exported.by_seq) - start) / (time.monotonic() - t0)
                 broker.kill()
-                before = len(exported.by_seq)
+                # ... and with it gone (the publisher in its back-off): the same schedule
+                before, t0 = len(exported.by_seq), time.monotonic()
                 assert await until(lambda: len(exported.by_seq) >= before + 60, 20.0), "polling stalled"
+                rate_down = (len(exported.by_seq) - before) / (time.monotonic() - t0)
+                assert rate_down >= 0.95 * rate_up, (rate_down, rate_up)
                 assert publisher.stats().dropped.get("arr", 0) > 0, "a 20-frame queue must overflow"
                 broker.start()
                 assert await until(lambda: publisher.stats().connected, 30.0), "no reconnect"
