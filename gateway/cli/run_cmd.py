@@ -81,7 +81,7 @@ _log_level = click.option(
 def _page(holder: SnapshotHolder, config: GatewayConfig, enabled: bool = True) -> WebPage | None:
     """The live page over ``holder``, unless it is turned off (``--no-page``, or a ``page =
     false`` of the metrics section where the configuration has that key)."""
-    if not enabled or not getattr(config.metrics, "page", True):
+    if not enabled or not config.metrics.page:
         return None
     return WebPage(FrameHub(holder))
 

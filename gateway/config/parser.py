@@ -47,7 +47,7 @@ _HOST_RE: Final = re.compile(
     r"(?=.{1,253}\Z)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62}))*\.?"
 )
 ROOT_KEYS: Final = ("metrics", "bus", "mqtt")
-_METRICS_KEYS: Final = ("address", "web_config")
+_METRICS_KEYS: Final = ("address", "web_config", "page")
 _BUS_KEYS: Final = (
     "name",
     "kind",
@@ -158,7 +158,7 @@ def parse_metrics(ctx: Context, root: Table) -> MetricsConfig:
     web_config = table.path_value("web_config")
     if web_config is not None:
         _check_private(ctx, table.at("web_config"), web_config, "web config: TLS keys and basic-auth users")
-    return MetricsConfig(host=host, port=port, web_config=web_config)
+    return MetricsConfig(host=host, port=port, web_config=web_config, page=table.boolean("page", True))
 
 
 def _network_host(table: Table, key: str) -> str:

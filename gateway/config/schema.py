@@ -129,8 +129,11 @@ class MetricsConfig:
     host: str = DEFAULT_METRICS_HOST
     port: int = DEFAULT_METRICS_PORT
     web_config: Path | None = None
+    page: bool = True  # the live page and its API at / (off: /metrics only)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.page, bool):
+            raise ConfigError(f"metrics: page: expected true or false, got {self.page!r}")
         if not isinstance(self.host, str) or not self.host:
             raise ConfigError(f"metrics: host: expected a host name or IP address, got {self.host!r}")
         check_integer("metrics", "port", self.port, *PORT)

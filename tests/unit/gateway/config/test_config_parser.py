@@ -307,3 +307,13 @@ def test_load_config_reads_no_device_and_no_huge_file(tmp_path: Path) -> None:
         f.truncate(MAX_FILE_BYTES + 1)  # sparse: no disk used
     with pytest.raises(ConfigError, match=r"larger than 4 MiB; too large for a configuration file"):
         load_config(huge)
+
+
+def test_the_page_can_be_turned_off_in_the_metrics_section() -> None:
+    assert parse(BASE).metrics.page is True
+    off = parse(replaced('address = "127.0.0.1:9830"', 'address = "127.0.0.1:9830"\npage = false'))
+    assert off.metrics.page is False
+    with pytest.raises(
+        ConfigError, match=r"metrics\.page: expected a boolean \(true or false\), got string 'no'"
+    ):
+        parse(replaced('address = "127.0.0.1:9830"', 'address = "127.0.0.1:9830"\npage = "no"'))
