@@ -198,3 +198,23 @@ def test_a_few_torn_unloaded_rows_do_not_hide_the_hidden_effect() -> None:
     resistance[torn] = 3e4
     report = run_discrepancy(replace(channel, resistance_ohm=resistance), baseline=PAPER)
     assert report.added == ["temperature"], [s.evidence for s in report.steps]
+
+
+def test_a_sensor_open_at_rest_still_gets_its_creep_named() -> None:
+    """Issue 16: on a record whose sensor reads open when unloaded (contact open at rest, no
+    leakage: 365 of 2352 rows are +inf), the open rows once dominated the score and nothing was
+    named, not even with creep as the only candidate."""
+    params = SimSensorParams(series_resistance_ohm=0.0, leakage_resistance_ohm=float("inf"))
+    config = ArrayConfig(
+        channels=1, columns=1, seed=1, scenario="discrepancy", world_effects=(), param_spread=False,
+        channel_params=params, sensor_noise_rel=NOISE, noise_lsb_rms=2.0,
+    )  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "open-at-rest.csv"
+        record_offline(config, path=path, record_period_s=2.0)
+        channel = read_record(path, require_force=True).channel("0")
+    assert np.isinf(channel.resistance_ohm).sum() > 300
+    assert run_discrepancy(channel, baseline=("tunneling", "contact")).added == ["creep"]
+    alone = run_discrepancy(channel, baseline=("tunneling", "contact"), candidates=("creep",))
+    assert alone.added == ["creep"]
+    assert alone.final_fit.gap_test.log_resistance_rms <= 1.5 * NOISE
