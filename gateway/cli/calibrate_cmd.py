@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 
 import click
@@ -39,6 +40,7 @@ from .common import parse_assignments
     "--plots", "plot_dir", type=click.Path(file_okay=False, path_type=Path), help="write PNGs to DIR"
 )
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object and nothing else")
+@click.option("--force", "overwrite", is_flag=True, help="replace --out even if it is not a calibration file")
 def calibrate_cmd(
     record_path: Path,
     channel_names: tuple[str, ...],
@@ -49,8 +51,14 @@ def calibrate_cmd(
     as_name: str | None,
     plot_dir: Path | None,
     as_json: bool,
+    overwrite: bool,
 ) -> None:
-    """Fit R0, the contact coefficient and E0, E1, mu1 (linear in force) to RECORD.csv."""
+    """Fit R0, the contact coefficient and E0, E1, mu1 (linear in force) to RECORD.csv.
+
+    ``--out`` replaces an earlier calibration file, but never another kind of file (a gateway
+    configuration, say) unless ``--force``."""
+    if out_path is not None:
+        _check_out(out_path, overwrite)
     try:
         chosen = parse_effects(effects)
         prior = SensorParams().with_overrides(parse_assignments(params, "--param"))
@@ -83,7 +91,10 @@ def calibrate_cmd(
         except ValueError as exc:
             raise click.ClickException(str(exc)) from None
     if out_path is not None:
-        write_calibration(out_path, results, model, rename)
+        try:
+            write_calibration(out_path, results, model, rename)
+        except OSError as exc:
+            raise click.ClickException(f"cannot write {out_path}: {exc.strerror or exc}") from None
     written: list[str] = []
     if plot_dir is not None:
         from ..analysis.calibration_plots import plot_calibration
@@ -114,3 +125,25 @@ def ch_record(record: object, name: str) -> object:
 
     assert isinstance(record, Record)
     return record.channel(name)
+
+
+#: The top-level tables a calibration file has (``analysis.calibration.calibration_toml``).
+_CALIBRATION_TABLES = frozenset({"channel", "line", "lookup"})
+
+
+def _check_out(path: Path, overwrite: bool) -> None:
+    """Refuse a missing folder, and an existing file that is not a calibration file."""
+    if not path.parent.is_dir():
+        raise click.UsageError(f"--out: directory {path.parent} does not exist")
+    if not path.exists() or overwrite:
+        return
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        kind_ok = bool(data) and set(data) <= _CALIBRATION_TABLES
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        kind_ok = False
+    if not kind_ok:
+        raise click.UsageError(
+            f"--out: {path} exists and is not a calibration file (it could be your gateway configuration); "
+            "refusing to replace it: choose another file, or --force"
+        )
