@@ -145,7 +145,8 @@ async def test_every_frame_arrives_in_order_with_the_exported_values(tmp_path: P
         publisher.start()
         try:
             async with Poller(config, holder):
-                assert await until(lambda: len(exported.by_seq) >= 150, 30.0)
+                # a 30 s run at 20 polls/s
+                assert await until(lambda: len(exported.by_seq) >= 600, 60.0)
         finally:
             publisher.stop()
         stats = publisher.stats()
