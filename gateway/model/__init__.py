@@ -12,7 +12,9 @@ plus the further effects named in ``docs/record-format.md``.
 * ``inversion``: force from resistance (statuses, Newton solvers);
 * ``model``: ``SensorModel``, which puts them together;
 * ``frontend``: the read-out front ends (``Divider``, the high-side divider of eq. 18;
-  ``LowSideDivider``; ``Transimpedance``) with their ADC, both ways;
+  ``LowSideDivider``; ``Transimpedance``) with their ADC, both ways, and the factory by kind;
+  ``frontend_base``: what they share (``FrontEnd``, ``DividerStatus``, the ADC);
+  ``frontend_dividers``: the two dividers; ``frontend_transimpedance``: the amplifier;
 * ``divider``: the paper's conductance line (and ``Divider`` re-exported).
 """
 

@@ -1,0 +1,216 @@
+"""Received messages into frames (pure, no broker): ``FrameStream`` turns the messages of the
+``meta`` and ``frame`` topics into ``Frame`` objects (JSON frames as they are; binary frames
+decoded with the channel names and encoding of the device's retained meta message, held back
+until that message has arrived) and ``SequenceTracker`` notices gaps, duplicates and restarts
+in the per-device sequence numbers.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+from .payload import BINARY_MAGIC, FrameDecodeError, decode_binary
+
+#: Frames of a device kept while its retained meta message has not arrived (binary frames
+#: need its channel names); beyond that the oldest are decoded with index names.
+PENDING_LIMIT: Final = 2000
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One received frame: the fields of ``payload.frame_dict`` and where it came from.
+    ``missing_before`` counts the frames of this device lost just before it (a gap);
+    ``restarted`` says its sequence started again (a restarted gateway or publisher)."""
+
+    gateway: str
+    device: str
+    fields: dict[str, Any]
+    missing_before: int = 0
+    restarted: bool = False
+
+    @property
+    def sequence(self) -> int:
+        return int(self.fields["sequence"])
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return self.gateway, self.device
+
+    def as_json(self) -> dict[str, Any]:
+        return {"gateway": self.gateway, **self.fields}
+
+
+_FRAME_KEYS: Final = ("sequence", "host_time_s", "channels", "force_n", "resistance_ohm", "status")
+
+
+def decode_json_frame(data: bytes, device: str) -> dict[str, Any]:
+    """A JSON frame, checked for the fields a subscriber uses (``FrameDecodeError`` if not)."""
+    try:
+        fields = json.loads(data)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise FrameDecodeError(f"not a JSON frame: {exc}") from None
+    if not isinstance(fields, dict):
+        raise FrameDecodeError("not a JSON frame: not an object")
+    missing = [k for k in _FRAME_KEYS if k not in fields]
+    if missing:
+        raise FrameDecodeError(f"a JSON frame without {', '.join(missing)}")
+    seq = fields["sequence"]
+    if not isinstance(seq, int) or isinstance(seq, bool) or seq < 0:
+        raise FrameDecodeError(f"a JSON frame with sequence {seq!r}")
+    n = len(fields["channels"])
+    if any(len(fields[k]) != n for k in ("force_n", "resistance_ohm", "status")):
+        raise FrameDecodeError("a JSON frame whose channel lists differ in length")
+    fields.setdefault("device", device)
+    return fields
+
+
+class SequenceTracker:
+    """Per stream (gateway, device): the last sequence number, and what a new one means.
+
+    The next number is in order; a larger one follows a gap of the numbers in between; 1
+    after a larger number is a restart (the publisher counts from 1); any other smaller or
+    equal number is a duplicate (QoS 1 may deliver twice) or late, and is dropped.
+    """
+
+    def __init__(self) -> None:
+        self.last: dict[tuple[str, str], int] = {}
+        self.missing = 0
+        self.gaps = 0
+        self.duplicates = 0
+        self.restarts = 0
+
+    def observe(self, key: tuple[str, str], seq: int) -> tuple[bool, int, bool]:
+        """(accept, missing before it, restarted)."""
+        last = self.last.get(key)
+        if last is None or seq == last + 1:
+            self.last[key] = seq
+            return True, 0, False
+        if seq > last + 1:
+            missing = seq - last - 1
+            self.missing += missing
+            self.gaps += 1
+            self.last[key] = seq
+            return True, missing, False
+        if seq == 1:
+            self.restarts += 1
+            self.last[key] = seq
+            return True, 0, True
+        self.duplicates += 1
+        return False, 0, False
+
+
+@dataclass
+class StreamStats:
+    frames: int = 0
+    undecodable: int = 0
+    meta: int = 0
+    devices: set[tuple[str, str]] = field(default_factory=set)
+    last_error: str | None = None
+
+
+class FrameStream:
+    """Messages in, frames out, in the order of each device's sequence numbers."""
+
+    def __init__(self, prefix: str, pending_limit: int = PENDING_LIMIT) -> None:
+        self.prefix_levels = prefix.split("/")
+        self.pending_limit = pending_limit
+        self.meta: dict[tuple[str, str], dict[str, Any]] = {}
+        self.pending: dict[tuple[str, str], list[bytes]] = {}
+        self.sequences = SequenceTracker()
+        self.stats = StreamStats()
+
+    def split_topic(self, topic: str) -> tuple[str, str, str] | None:
+        """(gateway, device, kind) of ``<prefix>/<gateway>/<device>/<kind>``, else None."""
+        levels = topic.split("/")
+        n = len(self.prefix_levels)
+        if len(levels) != n + 3 or levels[:n] != self.prefix_levels:
+            return None
+        gateway, device, kind = levels[n:]
+        return (gateway, device, kind) if kind in ("frame", "meta") else None
+
+    def feed(self, topic: str, payload: bytes) -> tuple[list[Frame], list[str]]:
+        """The frames a message completes (none, one, or those held for a meta message) and
+        notices for the user (a frame that could not be decoded)."""
+        parts = self.split_topic(topic)
+        if parts is None:
+            return [], []
+        gateway, device, kind = parts
+        key = (gateway, device)
+        if kind == "meta":
+            return self._meta(key, payload)
+        meta = self.meta.get(key)
+        if meta is None and payload[:4] == BINARY_MAGIC:
+            held = self.pending.setdefault(key, [])
+            held.append(payload)
+            if len(held) <= self.pending_limit:
+                return [], []
+            return self._decode(key, [held.pop(0)], None)
+        return self._decode(key, [payload], meta)
+
+    def flush(self) -> tuple[list[Frame], list[str]]:
+        """Frames still held for a meta message that never came (index names as channels)."""
+        frames: list[Frame] = []
+        notices: list[str] = []
+        for key, held in sorted(self.pending.items()):
+            if held:
+                notices.append(
+                    f"{key[0]}/{key[1]}: no meta message arrived; {len(held)} binary frame(s) decoded "
+                    "with channel numbers as names"
+                )
+            f, n = self._decode(key, held, None)
+            frames += f
+            notices += n
+        self.pending.clear()
+        return frames, notices
+
+    def _meta(self, key: tuple[str, str], payload: bytes) -> tuple[list[Frame], list[str]]:
+        if not payload:
+            self.meta.pop(key, None)  # a retained message cleared
+            return [], []
+        try:
+            meta = json.loads(payload)
+            names = [str(c["name"]) for c in meta["channels"]]
+            encoding = str(meta.get("encoding", "json"))
+        except (UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as exc:
+            self.stats.undecodable += 1
+            return [], [f"{key[0]}/{key[1]}: an unreadable meta message ({exc!r})"]
+        self.stats.meta += 1
+        self.meta[key] = {"channels": names, "encoding": encoding}
+        held = self.pending.pop(key, [])
+        return self._decode(key, held, self.meta[key]) if held else ([], [])
+
+    def _decode(
+        self, key: tuple[str, str], payloads: list[bytes], meta: dict[str, Any] | None
+    ) -> tuple[list[Frame], list[str]]:
+        frames: list[Frame] = []
+        notices: list[str] = []
+        for payload in payloads:
+            try:
+                fields = self._fields(key, payload, meta)
+            except FrameDecodeError as exc:
+                self.stats.undecodable += 1
+                self.stats.last_error = str(exc)
+                notices.append(f"{key[0]}/{key[1]}: a frame could not be decoded: {exc}")
+                continue
+            accept, missing, restarted = self.sequences.observe(key, int(fields["sequence"]))
+            if not accept:
+                continue
+            self.stats.frames += 1
+            self.stats.devices.add(key)
+            frames.append(Frame(key[0], key[1], fields, missing, restarted))
+        return frames, notices
+
+    @staticmethod
+    def _fields(key: tuple[str, str], payload: bytes, meta: dict[str, Any] | None) -> dict[str, Any]:
+        binary = payload[:4] == BINARY_MAGIC if meta is None else meta["encoding"] == "binary"
+        if not binary:
+            return decode_json_frame(payload, key[1])
+        names = None if meta is None else list(meta["channels"])
+        fields = decode_binary(payload, key[1], names)
+        if names is not None and len(fields["force_n"]) != len(names):
+            raise FrameDecodeError(
+                f"the frame has {len(fields['force_n'])} channels, its meta message names {len(names)}"
+            )
+        return fields
