@@ -36,7 +36,7 @@ import logging
 import math
 import random
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..config import BusConfig, DeviceConfig
@@ -49,9 +49,10 @@ from ..errors import (
     DeviceTimeoutError,
 )
 from ..modbus.client import ModbusTransport
-from ..modbus.image import RegisterImage, RegisterKind, decode_sample
+from ..modbus.image import RegisterKind
 from ..modbus.plan import MERGE_GAP, ReadRequest, device_plan
 from ..modbus.transport import Transport
+from .conversion import Conversion
 from .counters import DeviceCounters, Tally
 from .identity import verify_device
 from .processor import ClockHealth, DeviceProcessor, DeviceState
@@ -74,54 +75,6 @@ def error_reason(exc: BaseException) -> str:
     if isinstance(exc, DeviceMismatchError):
         return "mismatch"
     return "decode"
-
-
-class Conversion:
-    """One poll's registers on their way to a snapshot, in three steps: decode, track
-    (resistances and drift-corrected forces), finish (statuses, array quantities, the
-    snapshot). The poller runs one step at a time while a device works on an answer.
-
-    ``wall_time_s`` (Unix) and ``host_time_s`` (monotonic) are taken when the reads end, so
-    that the result does not depend on when the steps run. ``state`` is the device state
-    the conversion starts from: conversions of one device run one after the other.
-    """
-
-    def __init__(
-        self,
-        processor: DeviceProcessor,
-        state: DeviceState,
-        reads: list[tuple[RegisterKind, int, list[int]]],
-        wall_time_s: float,
-        host_time_s: float,
-        reads_duration_s: float,
-    ) -> None:
-        self._steps = self._run(processor, state, reads, wall_time_s, host_time_s)
-        self.result: tuple[DeviceSnapshot, DeviceState] | None = None
-        self.duration_s = reads_duration_s  # reads, plus the time spent in each step
-
-    @staticmethod
-    def _run(
-        processor: DeviceProcessor,
-        state: DeviceState,
-        reads: list[tuple[RegisterKind, int, list[int]]],
-        wall_time_s: float,
-        host_time_s: float,
-    ) -> Iterator[tuple[DeviceSnapshot, DeviceState] | None]:
-        raw = decode_sample(processor.device, RegisterImage.from_reads(reads))
-        yield None
-        tracked = processor.track(state, raw, wall_time_s, host_time_s)
-        yield None
-        yield processor.finish(tracked)
-
-    def step(self) -> bool:
-        """Run the next step; True once the result is there. Raises what a step raises."""
-        if self.result is None:
-            t0 = time.monotonic()
-            try:
-                self.result = next(self._steps)
-            finally:
-                self.duration_s += time.monotonic() - t0
-        return self.result is not None
 
 
 @dataclass

@@ -1,0 +1,61 @@
+"""One poll's registers on their way to a snapshot, in steps the bus task runs while a device
+works on the next answer (see ``bus``)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+from ..modbus.image import RegisterImage, RegisterKind, decode_sample
+from .processor import DeviceProcessor, DeviceState
+from .snapshot import DeviceSnapshot
+
+__all__ = ["Conversion"]
+
+
+class Conversion:
+    """One poll's registers on their way to a snapshot, in three steps: decode, track
+    (resistances and drift-corrected forces), finish (statuses, array quantities, the
+    snapshot). The poller runs one step at a time while a device works on an answer.
+
+    ``wall_time_s`` (Unix) and ``host_time_s`` (monotonic) are taken when the reads end, so
+    that the result does not depend on when the steps run. ``state`` is the device state
+    the conversion starts from: conversions of one device run one after the other.
+    """
+
+    def __init__(
+        self,
+        processor: DeviceProcessor,
+        state: DeviceState,
+        reads: list[tuple[RegisterKind, int, list[int]]],
+        wall_time_s: float,
+        host_time_s: float,
+        reads_duration_s: float,
+    ) -> None:
+        self._steps = self._run(processor, state, reads, wall_time_s, host_time_s)
+        self.result: tuple[DeviceSnapshot, DeviceState] | None = None
+        self.duration_s = reads_duration_s  # reads, plus the time spent in each step
+
+    @staticmethod
+    def _run(
+        processor: DeviceProcessor,
+        state: DeviceState,
+        reads: list[tuple[RegisterKind, int, list[int]]],
+        wall_time_s: float,
+        host_time_s: float,
+    ) -> Iterator[tuple[DeviceSnapshot, DeviceState] | None]:
+        raw = decode_sample(processor.device, RegisterImage.from_reads(reads))
+        yield None
+        tracked = processor.track(state, raw, wall_time_s, host_time_s)
+        yield None
+        yield processor.finish(tracked)
+
+    def step(self) -> bool:
+        """Run the next step; True once the result is there. Raises what a step raises."""
+        if self.result is None:
+            t0 = time.monotonic()
+            try:
+                self.result = next(self._steps)
+            finally:
+                self.duration_s += time.monotonic() - t0
+        return self.result is not None
