@@ -14,14 +14,13 @@ from __future__ import annotations
 
 import re
 import socket
-import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
 from ..model.params import Interval
-from .tables import Context, Table
+from .tables import Context, Table, check_exists, check_private
 
 __all__ = ["MQTT_ENCODINGS", "MQTT_PROTOCOLS", "MqttConfig", "MqttTls", "check_topic_level", "parse_mqtt"]
 
@@ -105,28 +104,6 @@ def check_topic_level(where: str, value: str, *, allow_slash: bool) -> None:
         raise ConfigError(f"{where}: {value!r} {reason}")
 
 
-def _private(ctx: Context, path: str, file: Path) -> None:
-    try:
-        mode = stat.S_IMODE(file.stat().st_mode)
-    except FileNotFoundError:
-        raise ctx.error(path, f"{file} does not exist") from None
-    except OSError as exc:
-        raise ctx.error(path, f"cannot access {file}: {exc.strerror or exc}") from None
-    if not file.is_file():
-        raise ctx.error(path, f"{file} is not a regular file")
-    if mode & 0o077:
-        raise ctx.error(
-            path,
-            f"{file} holds a secret but is accessible to other users (mode {mode:04o}; allowed: no "
-            f"group/other permissions, e.g. 0600): run `chmod 600 {file}`",
-        )
-
-
-def _exists(ctx: Context, path: str, file: Path) -> None:
-    if not file.is_file():
-        raise ctx.error(path, f"{file} does not exist or is not a regular file")
-
-
 def default_gateway_name() -> str:
     name = re.sub(r"[^A-Za-z0-9_.-]", "-", socket.gethostname().split(".")[0]) or "gateway"
     return name[:64]
@@ -150,20 +127,20 @@ def parse_mqtt(ctx: Context, root: Table) -> MqttConfig | None:
             t.boolean("verify", True),
         )
         if tls.ca_file is not None:
-            _exists(ctx, t.at("ca_file"), tls.ca_file)
+            check_exists(ctx, t.at("ca_file"), tls.ca_file, "CA certificates")
         if tls.cert_file is not None:
-            _exists(ctx, t.at("cert_file"), tls.cert_file)
+            check_exists(ctx, t.at("cert_file"), tls.cert_file, "client certificate")
         if tls.key_file is not None:
             if tls.cert_file is None:
                 raise t.error("key_file", "needs cert_file as well (the certificate the key belongs to)")
-            _private(ctx, t.at("key_file"), tls.key_file)
+            check_private(ctx, t.at("key_file"), tls.key_file, "the MQTT client key")
     port = table.integer("port", 8883 if tls is not None else 1883, 1, 65535)
     username = table.string("username", None, "a user name")
     password_file = table.path_value("password_file")
     if password_file is not None:
         if username is None:
             raise table.error("password_file", "needs username as well")
-        _private(ctx, table.at("password_file"), password_file)
+        check_private(ctx, table.at("password_file"), password_file, "the MQTT password")
     gateway = table.string("gateway", None, "this gateway's topic level") or default_gateway_name()
     prefix = table.string("topic_prefix", "tactile", "topic levels such as 'plant/a/tactile'") or "tactile"
     for key, value, slash in (("gateway", gateway, False), ("topic_prefix", prefix, True)):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import ipaddress
 import re
-import stat
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
@@ -41,7 +40,7 @@ from .schema import (
     MetricsConfig,
     TlsConfig,
 )
-from .tables import REQUIRED, Context, Table, parse_toml, read_text_file
+from .tables import REQUIRED, Context, Table, check_exists, check_private, parse_toml, read_text_file
 
 _HOST_RE: Final = re.compile(
     r"(?=.{1,253}\Z)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62}))*\.?"
@@ -93,31 +92,6 @@ def parse_config(text: str, source: Path | None = None) -> GatewayConfig:
     return GatewayConfig(metrics=metrics, buses=buses, source=ctx.source, mqtt=mqtt)
 
 
-def _check_private(ctx: Context, path: str, file: Path, what: str) -> None:
-    """Refuse a secret-holding file that users other than its owner can access."""
-    try:
-        mode = stat.S_IMODE(file.stat().st_mode)
-    except FileNotFoundError:
-        raise ctx.error(path, f"{file} does not exist ({what})") from None
-    except OSError as exc:
-        raise ctx.error(path, f"cannot access {file}: {exc.strerror or exc}") from None
-    if not file.is_file():
-        raise ctx.error(path, f"{file} is not a regular file ({what})")
-    if mode & 0o077:
-        raise ctx.error(
-            path,
-            f"{file} holds secrets ({what}) but is accessible to other users (mode {mode:04o}; allowed: "
-            f"no group/other permissions, e.g. 0600): run `chmod 600 {file}`",
-        )
-
-
-def _check_exists(ctx: Context, path: str, file: Path, what: str) -> None:
-    if not file.exists():
-        raise ctx.error(path, f"{file} does not exist ({what})")
-    if not file.is_file():
-        raise ctx.error(path, f"{file} is not a regular file ({what})")
-
-
 def _parse_host(value: str) -> str | None:
     """A host name or IP address (IPv6 with or without brackets), or ``None`` if malformed."""
     inner = value[1:-1] if value.startswith("[") and value.endswith("]") else value
@@ -157,7 +131,7 @@ def parse_metrics(ctx: Context, root: Table) -> MetricsConfig:
         host, port = parsed, int(port_text)
     web_config = table.path_value("web_config")
     if web_config is not None:
-        _check_private(ctx, table.at("web_config"), web_config, "web config: TLS keys and basic-auth users")
+        check_private(ctx, table.at("web_config"), web_config, "web config: TLS keys and basic-auth users")
     return MetricsConfig(host=host, port=port, web_config=web_config, page=table.boolean("page", True))
 
 
@@ -278,11 +252,11 @@ def _parse_tls(ctx: Context, bus: Table) -> TlsConfig:
     if key_file is not None and cert_file is None:
         raise table.error("key_file", "needs cert_file as well (the certificate the key belongs to)")
     if ca_file is not None:
-        _check_exists(ctx, table.at("ca_file"), ca_file, "CA certificates")
+        check_exists(ctx, table.at("ca_file"), ca_file, "CA certificates")
     if cert_file is not None:
-        _check_exists(ctx, table.at("cert_file"), cert_file, "client certificate")
+        check_exists(ctx, table.at("cert_file"), cert_file, "client certificate")
     if key_file is not None:
-        _check_private(ctx, table.at("key_file"), key_file, "the client's private key")
+        check_private(ctx, table.at("key_file"), key_file, "the client's private key")
     return TlsConfig(
         ca_file=ca_file,
         cert_file=cert_file,

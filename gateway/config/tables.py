@@ -282,3 +282,28 @@ def parse_toml(ctx: Context, text: str, what: str) -> dict[str, Any]:
             line = text.count("\n") + 1
             raise ctx.error("", f"invalid TOML at line {line} (end of {what}): {message}") from None
         raise ctx.error("", f"invalid TOML: {message}") from None
+
+
+def check_private(ctx: Context, path: str, file: Path, what: str) -> None:
+    """Refuse a secret-holding file that users other than its owner can access."""
+    try:
+        mode = stat.S_IMODE(file.stat().st_mode)
+    except FileNotFoundError:
+        raise ctx.error(path, f"{file} does not exist ({what})") from None
+    except OSError as exc:
+        raise ctx.error(path, f"cannot access {file}: {exc.strerror or exc}") from None
+    if not file.is_file():
+        raise ctx.error(path, f"{file} is not a regular file ({what})")
+    if mode & 0o077:
+        raise ctx.error(
+            path,
+            f"{file} holds secrets ({what}) but is accessible to other users (mode {mode:04o}; allowed: "
+            f"no group/other permissions, e.g. 0600): run `chmod 600 {file}`",
+        )
+
+
+def check_exists(ctx: Context, path: str, file: Path, what: str) -> None:
+    if not file.exists():
+        raise ctx.error(path, f"{file} does not exist ({what})")
+    if not file.is_file():
+        raise ctx.error(path, f"{file} is not a regular file ({what})")
