@@ -305,3 +305,41 @@ def test_the_last_will_says_offline_when_the_gateway_is_killed(tmp_path: Path, b
             gateway.wait(timeout=10)
         sim.terminate()
         sim.wait(timeout=10)
+
+
+def test_a_sighup_moves_the_frames_to_a_new_topic_prefix(tmp_path: Path, broker: Broker) -> None:
+    """The [mqtt] section is reloaded on SIGHUP: new broker settings restart the publisher."""
+    sim_port = free_port()
+    sim = subprocess.Popen(
+        [str(BIN / "tactile-sim"), "run", "--tcp", f"127.0.0.1:{sim_port}", "--channels", "4"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    sub = Subscriber(broker.port, ["lab/tactile/gw1/arr/frame", "site/b/gw1/arr/frame", "site/b/gw1/status"])
+    gateway = None
+    try:
+        config = _config(tmp_path, sim_port, broker.port)
+        gateway = subprocess.Popen(
+            [str(BIN / "tactile-gateway"), "run", "-c", str(config)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )  # fmt: skip
+        deadline = time.monotonic() + 20.0
+        while len(sub.of("lab/tactile/gw1/arr/frame")) < 5 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert len(sub.of("lab/tactile/gw1/arr/frame")) >= 5
+        config.write_text(
+            config.read_text().replace('topic_prefix = "lab/tactile"', 'topic_prefix = "site/b"')
+        )
+        gateway.send_signal(signal.SIGHUP)
+        deadline = time.monotonic() + 20.0
+        while len(sub.of("site/b/gw1/arr/frame")) < 5 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert len(sub.of("site/b/gw1/arr/frame")) >= 5, "no frames under the new prefix"
+        assert b"online" in sub.of("site/b/gw1/status")
+        assert gateway.poll() is None, "the gateway kept running"
+    finally:
+        sub.close()
+        if gateway is not None and gateway.poll() is None:
+            gateway.terminate()
+            gateway.wait(timeout=20)
+        sim.terminate()
+        sim.wait(timeout=10)
