@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Callable, Iterable
 from functools import lru_cache
+from typing import Final
 
 from prometheus_client import CollectorRegistry, generate_latest
 from prometheus_client.metrics_core import Metric
@@ -63,41 +65,76 @@ def _finite(x: float | None) -> bool:
 
 
 class SnapshotExposition:
-    """Renders the snapshot ``source`` returns; caches the bytes of the last snapshot."""
+    """Renders the snapshot ``source`` returns; caches the bytes of the last snapshot and each
+    device's channel lines (a device whose snapshot did not change since the last scrape costs
+    nothing). Between devices it lets other threads run (``time.sleep(0)``), so a scrape
+    rendered in a worker thread never holds the interpreter for more than one device's lines
+    and the poll loop keeps its schedule."""
 
-    def __init__(self, source: Callable[[], GatewaySnapshot]) -> None:
+    def __init__(self, source: Callable[[], GatewaySnapshot], *, yield_between_devices: bool = True) -> None:
         self._source = source
+        self._yield = yield_between_devices
         self._lock = threading.Lock()
         self._cached: tuple[GatewaySnapshot, bytes] | None = None
+        self._devices: dict[str, tuple[DeviceSnapshot, tuple[str, ...]]] = {}
 
     def __call__(self) -> bytes:
         snap = self._source()
         with self._lock:
             cached = self._cached
-        if cached is not None and cached[0] is snap:
-            return cached[1]
-        body = render(snap).encode("utf-8")
-        with self._lock:
+            if cached is not None and cached[0] is snap:
+                return cached[1]
+            body = self._render(snap).encode("utf-8")
             self._cached = (snap, body)
         return body
+
+    def _render(self, snap: GatewaySnapshot) -> str:
+        chunks: dict[str, tuple[str, ...]] = {}
+        for name, dev in snap.devices.items():
+            known = self._devices.get(name)
+            if known is not None and known[0] is dev:
+                chunks[name] = known[1]
+                continue
+            chunks[name] = _device_chunks(name, dev)
+            self._devices[name] = (dev, chunks[name])
+            if self._yield:
+                time.sleep(0)  # let the poll loop's thread take the interpreter between devices
+        for gone in set(self._devices) - set(snap.devices):
+            del self._devices[gone]
+        return _assemble(snap, chunks)
+
+
+_CHANNEL_FAMILIES: Final = (
+    "tactile_force_newtons",
+    "tactile_force_static_newtons",
+    "tactile_reference_force_newtons",
+    "tactile_resistance_ohms",
+    "tactile_channel_status",
+    "tactile_channel_position_mm",
+)
+
+
+def _device_chunks(name: str, dev: DeviceSnapshot) -> tuple[str, ...]:
+    """One device's lines of each per-channel family, joined."""
+    lines: tuple[list[str], ...] = tuple([] for _ in _CHANNEL_FAMILIES)
+    _channel_lines(name, dev, *lines)
+    return tuple("".join(part) for part in lines)
+
+
+def _assemble(snap: GatewaySnapshot, chunks: dict[str, tuple[str, ...]]) -> str:
+    h = _headers()
+    names = sorted(snap.devices)
+    out: list[str] = []
+    for k, family in enumerate(_CHANNEL_FAMILIES):
+        out.append(h[family])
+        out.extend(chunks[name][k] for name in names)
+    out += _device_lines(snap, names, [snap.devices[n] for n in names], h)
+    return "".join(out)
 
 
 def render(snap: GatewaySnapshot) -> str:
     """The text exposition of ``snap`` (see the module docstring)."""
-    h = _headers()
-    names = sorted(snap.devices)
-    devices = [snap.devices[n] for n in names]
-    force: list[str] = [h["tactile_force_newtons"]]
-    static: list[str] = [h["tactile_force_static_newtons"]]
-    reference: list[str] = [h["tactile_reference_force_newtons"]]
-    resistance: list[str] = [h["tactile_resistance_ohms"]]
-    status: list[str] = [h["tactile_channel_status"]]
-    position: list[str] = [h["tactile_channel_position_mm"]]
-    for name, dev in zip(names, devices, strict=True):
-        _channel_lines(name, dev, force, static, reference, resistance, status, position)
-    out = [*force, *static, *reference, *resistance, *status, *position]
-    out += _device_lines(snap, names, devices, h)
-    return "".join(out)
+    return _assemble(snap, {name: _device_chunks(name, dev) for name, dev in snap.devices.items()})
 
 
 def _channel_lines(
