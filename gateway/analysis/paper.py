@@ -69,7 +69,9 @@ def _holds(channel: ChannelRecord, level_n: float) -> tuple[FloatArray, FloatArr
     """Time since the first sample, resistance, and the sampling gap before the hold.
 
     The step happened somewhere between the last sample before the hold and its first
-    sample; that gap bounds the unknown onset.
+    sample; that gap bounds the unknown onset. Leading samples of the hold that read open
+    were taken before the step (their reference force was read after it: the two blocks are
+    separate Modbus requests), so the hold starts at its first finite reading.
     """
     assert channel.force_n is not None
     at = np.abs(channel.force_n - level_n) < 1e-6
@@ -78,6 +80,10 @@ def _holds(channel: ChannelRecord, level_n: float) -> tuple[FloatArray, FloatArr
         raise ValueError(f"the record has no hold at {level_n:g} N")
     breaks = np.flatnonzero(np.diff(idx) > 1)
     first = idx[: breaks[0] + 1] if breaks.size else idx
+    # a reading taken across the step (reference already at the level, resistance still
+    # open) belongs before the step: the step happened after it
+    lead = int(np.argmax(np.isfinite(channel.resistance_ohm[first])))
+    first = first[lead:]
     t = channel.time_s[first]
     r = channel.resistance_ohm[first]
     gap = float(t[0] - channel.time_s[first[0] - 1]) if first[0] > 0 else 0.0
