@@ -28,8 +28,26 @@ def _check_reference(value: float | None) -> None:
         _check_positive("adc_reference_v", value, "V")
 
 
+class _SupplyDivider(FrontEnd):
+    """What the two dividers share: a supply rail, a reference resistor, and an ADC whose
+    reference is the supply unless it is given (a ratiometric converter)."""
+
+    supply_v: float
+    reference_ohm: float
+    adc_reference_v: float | None
+
+    def _validate_parameters(self) -> None:
+        _check_positive("supply_v", self.supply_v, "V")
+        _check_positive("reference_ohm", self.reference_ohm, "ohm")
+        _check_reference(self.adc_reference_v)
+
+    @property
+    def reference_v(self) -> float:
+        return self.supply_v if self.adc_reference_v is None else self.adc_reference_v
+
+
 @dataclass(frozen=True)
-class Divider(FrontEnd):
+class Divider(_SupplyDivider):
     """High-side divider, the paper's eq. 18 (Fig. 4b): the sensor r from the supply V+ to the
     output node, R_ref from the output to ground::
 
@@ -49,15 +67,6 @@ class Divider(FrontEnd):
     adc_bits: int = 16
     adc_reference_v: float | None = None
     adc_offset_counts: float = 0.0
-
-    def _validate_parameters(self) -> None:
-        _check_positive("supply_v", self.supply_v, "V")
-        _check_positive("reference_ohm", self.reference_ohm, "ohm")
-        _check_reference(self.adc_reference_v)
-
-    @property
-    def reference_v(self) -> float:
-        return self.supply_v if self.adc_reference_v is None else self.adc_reference_v
 
     @property
     def _plain(self) -> bool:
@@ -130,7 +139,7 @@ class Divider(FrontEnd):
 
 
 @dataclass(frozen=True)
-class LowSideDivider(FrontEnd):
+class LowSideDivider(_SupplyDivider):
     """Low-side divider: R_ref is a pull-up from the supply V+ to the output node, the sensor
     r goes from the output to ground::
 
@@ -149,15 +158,6 @@ class LowSideDivider(FrontEnd):
     adc_bits: int
     adc_reference_v: float | None = None
     adc_offset_counts: float = 0.0
-
-    def _validate_parameters(self) -> None:
-        _check_positive("supply_v", self.supply_v, "V")
-        _check_positive("reference_ohm", self.reference_ohm, "ohm")
-        _check_reference(self.adc_reference_v)
-
-    @property
-    def reference_v(self) -> float:
-        return self.supply_v if self.adc_reference_v is None else self.adc_reference_v
 
     def output_voltage(self, resistance_ohm: ArrayLike) -> FloatArray:
         """V_o for a sensor resistance; inf gives V+ (open), 0 gives 0 V (short)."""
