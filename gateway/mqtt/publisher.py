@@ -43,7 +43,7 @@ BACKOFF_INITIAL_S = 0.5
 BACKOFF_MAX_S = 30.0
 KEEPALIVE_S = 15
 LOOP_TIMEOUT_S = 0.02
-STOP_FLUSH_S = 2.0
+STOP_FLUSH_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -297,3 +297,6 @@ class MqttPublisher:
             for name, _, _ in self._queue:
                 self._dropped[name] = self._dropped.get(name, 0) + 1
             self._queue.clear()
+            for name in self._in_flight.values():  # never acknowledged: not delivered, as far as we know
+                self._dropped[name] = self._dropped.get(name, 0) + 1
+            self._in_flight.clear()
