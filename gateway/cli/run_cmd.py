@@ -343,15 +343,18 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
                     else:  # a log or a pipe: the addresses once, then a line every 5 s
                         out.write(f"page on {server.page_url or '(off)'} - metrics on {server.url}\n")
                         out.flush()
-                    next_line = time.monotonic() + 1.0
+                    # the first line once the array answers (or after 5 s), then every 5 s
+                    next_line = time.monotonic() + 5.0
+                    first = True
                     while not stop.is_set() and (t_end is None or time.monotonic() < t_end):
                         snap = holder.get().devices.get("demo")
                         if snap is not None and tty:
                             frame = render_view(snap, 4, server.url, color=tty, page_url=server.page_url)
                             out.write("\x1b[H" + frame + "\x1b[J")
                             out.flush()
-                        elif snap is not None and time.monotonic() >= next_line:
-                            next_line += 5.0
+                        elif snap is not None and (time.monotonic() >= next_line or (first and snap.up)):
+                            first = False
+                            next_line = time.monotonic() + 5.0
                             out.write(_summary_line(snap))
                             out.flush()
                         with contextlib.suppress(TimeoutError):
