@@ -36,7 +36,7 @@ from typing import Any, Final
 import numpy as np
 
 from ..errors import GatewayError
-from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot
+from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
 __all__ = ["BINARY_MAGIC", "FrameDecodeError", "decode_binary", "encode_binary", "encode_json", "frame_dict"]
 
@@ -53,7 +53,7 @@ def _opt(value: float | None) -> float | None:
 
 
 def _values(array: Any) -> list[float | None]:
-    return [None if not math.isfinite(v) else float(v) for v in np.asarray(array, dtype=np.float64).tolist()]
+    return finite_or_none(np.asarray(array, dtype=np.float64))
 
 
 def frame_dict(snapshot: DeviceSnapshot, sequence: int) -> dict[str, Any]:

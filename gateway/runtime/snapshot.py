@@ -13,7 +13,7 @@ from __future__ import annotations
 import enum
 import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import TypeVar
@@ -90,8 +90,20 @@ class ChannelView:
     reference_force_n: float | None
 
 
-def _opt(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
+def _opt(x: float | None) -> float | None:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def finite_or_none(
+    values: Iterable[float] | NDArray[np.float64], digits: int | None = None
+) -> list[float | None]:
+    """Values for JSON (the page's frames, MQTT frames): floats, rounded to ``digits``
+    decimals if given, None where absent or not finite (JSON has no NaN)."""
+    raw = values.tolist() if isinstance(values, np.ndarray) else values
+    floats = [_opt(float(v)) for v in raw]
+    if digits is None:
+        return floats
+    return [None if f is None else round(f, digits) for f in floats]
 
 
 @dataclass(frozen=True, eq=False)

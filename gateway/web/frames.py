@@ -15,7 +15,7 @@ from collections.abc import Iterable
 from typing import Any
 
 from ..runtime.counters import DeviceCounters
-from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot
+from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
 #: Units of every quantity in the API, as listed with each device.
 UNITS: dict[str, str] = {
@@ -35,7 +35,7 @@ def num(x: float | None, digits: int = 6) -> float | None:
 
 
 def num_list(values: Iterable[float], digits: int = 6) -> list[float | None]:
-    return [num(float(v), digits) for v in values]
+    return finite_or_none(values, digits)
 
 
 def _channel(dev: DeviceSnapshot, k: int) -> dict[str, Any]:
