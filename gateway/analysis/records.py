@@ -147,7 +147,8 @@ def _parse_record(text: str, path: Path | None, where: str, require_force: bool)
     for name in needed:
         if name not in header:
             raise RecordError(
-                f"{where}:{header_line}: missing required column {name!r} (found: {', '.join(header)})"
+                f"{where}:{header_line}: missing required column {name!r} (found: "
+                f"{', '.join(h.encode('unicode_escape').decode('ascii') for h in header)})"
             )
     index = {name: header.index(name) for name in KNOWN_COLUMNS if name in header}
     extra = tuple(h for h in header if h not in KNOWN_COLUMNS)

@@ -184,3 +184,12 @@ def test_a_field_over_the_csv_limit_is_a_record_error(tmp_path: Path) -> None:
     path.write_text("time_s,resistance_ohm\n0," + "1" * 200_000 + "\n")
     with pytest.raises(RecordError, match=r"not a readable CSV record: field larger than field limit"):
         read_record(path)
+
+
+def test_a_header_with_a_newline_inside_a_quoted_name_is_named_on_one_line() -> None:
+    """Found by the fuzz test: a quoted header field holding a newline made a two-line message."""
+    with pytest.raises(RecordError) as caught:
+        parse_record('time_s,"0.0\n0.1",nan\n0,1,2\n')
+    message = str(caught.value)
+    assert "\n" not in message and "missing required column 'resistance_ohm'" in message
+    assert "0.0\\n0.1" in message
