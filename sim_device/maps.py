@@ -74,6 +74,8 @@ class DeviceMap(ABC):
     name: ClassVar[str]
     #: electronics settings the board fixes: ``SimArray.set_electronics`` refuses them
     fixed_electronics: ClassVar[frozenset[str]] = frozenset()
+    #: input registers (first, count) of the device clock, whose read latches a frame; None: no clock
+    clock_registers: ClassVar[tuple[int, int] | None] = None
 
     def __init__(self, channels: int, columns: int, pitch_um: int) -> None:
         self.n_channels = channels
@@ -132,6 +134,7 @@ class TactileSimMap(DeviceMap):
     """``docs/register-map.md``: the project's own map and high-side divider (eq. 18)."""
 
     name = "tactile-sim"
+    clock_registers = (reg.IR_DEVICE_TIME_MS, 4)
 
     def __init__(self, channels: int, columns: int, pitch_um: int) -> None:
         super().__init__(channels, columns, pitch_um)

@@ -2,12 +2,20 @@
 
 Each ``SimArray`` becomes a pymodbus ``SimDevice`` with non-shared blocks (holding and input
 registers are separate address spaces) and an ``action`` callback that refreshes the
-registers from the array on every access and validates configuration writes. The blocks
+registers from the array on every access and validates configuration writes. A read that
+covers the device clock latches the frame, as a data logger's snapshot register does: input
+reads without the clock that follow within ``LATCH_S`` of wall time are answered from the
+same conversion, so a poll's clock and values agree however long the requests between them
+take (a read that covers the clock, or one after ``LATCH_S``, is live). The blocks
 are those of the array's register map (``sim_device.maps``); a map without holding
 registers gets a placeholder block that the callback refuses (exception 2), as the bit blocks.
 """
 
 from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Final
 
 from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData, SimDevice
@@ -18,6 +26,8 @@ from .maps import Block, TactileSimMap
 
 _BIT_FUNCTIONS = frozenset({1, 2, 5, 15})
 _INPUT_FUNCTIONS = frozenset({4})
+#: Wall seconds a clock read's frame serves the input reads that follow it.
+LATCH_S: Final = 1.0
 
 
 _DATATYPES = {
@@ -48,9 +58,11 @@ def _bit_block() -> list[SimData]:
 class Binding:
     """Connects one ``SimArray`` to its pymodbus ``SimDevice`` registers."""
 
-    def __init__(self, array: SimArray) -> None:
+    def __init__(self, array: SimArray, wall: Callable[[], float] = time.monotonic) -> None:
         self.array = array
+        self._wall = wall
         self._input_image: list[int] | None = None
+        self._latched_at = -float("inf")
         device_map = array.register_map
         self._has_holding = bool(device_map.holding_blocks())
         holding = _simdata(device_map.holding_blocks())
@@ -60,6 +72,18 @@ class Binding:
             simdata=(_bit_block(), _bit_block(), holding, inputs),
             action=self.action,
         )
+
+    def _input_frame(self, address: int, count: int) -> list[int]:
+        """The input image a read of ``count`` registers at ``address`` sees (see the module docstring)."""
+        clock = self.array.register_map.clock_registers
+        now = self._wall()
+        if clock is not None and address <= clock[0] + clock[1] - 1 and address + count - 1 >= clock[0]:
+            self._latched_at = now
+            return self.array.input_registers()
+        if self._input_image is not None and now - self._latched_at < LATCH_S:
+            return self._input_image
+        self._latched_at = -float("inf")
+        return self.array.input_registers()
 
     async def action(
         self,
@@ -74,7 +98,7 @@ class Binding:
         if function_code in _BIT_FUNCTIONS:
             return ExcCodes.ILLEGAL_ADDRESS
         if function_code in _INPUT_FUNCTIONS:
-            image = self.array.input_registers()
+            image = self._input_frame(address, count)
             if image is not self._input_image:
                 registers[-start_address : len(image) - start_address] = image
                 self._input_image = image

@@ -142,14 +142,17 @@ def plan_with_device_time(
     """Add the device clock to a read plan.
 
     The clock makes the creep time steps right whatever the poll timing (and with a
-    simulator running faster than real time). It joins a read of its table that touches or
+    simulator running faster than real time). Its request goes first: the values are read
+    as soon after the time as the bus allows, and a device that latches a frame when its
+    clock is read (as data loggers with a snapshot register do) answers the rest of the poll
+    from that instant. It joins a read of its table that touches or
     adjoins it, else it is one more request: registers across a wider gap may not exist
     (the simulator's 7-15 do not), so the clock never rides on a read over unknown ground.
     """
     lo, hi = clock.address, clock.address + clock.registers - 1
     same = [r for r in plan if r.kind == clock.table]
     if any(r.address <= lo and r.end >= hi for r in same):
-        return tuple(
+        return _clock_first(
             ReadRequest(r.kind, r.address, r.count, ("device_time", *r.purpose))
             if r.address <= lo and r.end >= hi and "device_time" not in r.purpose
             else r
@@ -159,8 +162,13 @@ def plan_with_device_time(
         start, end = min(r.address, lo), max(r.end, hi)
         if r.address <= hi + 1 and r.end >= lo - 1 and end - start + 1 <= max_read_registers:
             merged = ReadRequest(r.kind, start, end - start + 1, ("device_time", *r.purpose))
-            return tuple(merged if q is r else q for q in plan)
+            return _clock_first(merged if q is r else q for q in plan)
     return (ReadRequest(clock.table, lo, clock.registers, ("device_time",)), *plan)
+
+
+def _clock_first(plan: Iterable[ReadRequest]) -> tuple[ReadRequest, ...]:
+    """The plan with the request that reads the clock first (the others in their order)."""
+    return tuple(sorted(plan, key=lambda r: "device_time" not in r.purpose))
 
 
 def device_plan(

@@ -299,3 +299,39 @@ def test_sensor_noise_is_validated() -> None:
 
     with pytest.raises(ConfigError, match=r"sensor_noise_rel = 0.9 must be in \[0, 0.5\]"):
         ArrayConfig(sensor_noise_rel=0.9)
+
+
+def test_a_clock_read_latches_the_frame_for_the_reads_that_follow() -> None:
+    import asyncio
+
+    from sim_device.pymodbus_device import LATCH_S, Binding
+
+    clock, wall = Clock(), Clock()
+    array = make(clock, speed=100.0, sample_period_s=0.01)
+    binding = Binding(array, wall=wall)
+    registers = [0] * reg.input_size(array.n_channels)
+
+    def read(address: int, count: int) -> list[int]:
+        assert asyncio.run(binding.action(4, 0, address, count, registers, None)) is None
+        return registers[address : address + count]
+
+    def counter() -> int:
+        words = read(reg.IR_SAMPLE_COUNTER, 2)
+        return (words[0] << 16) | words[1]
+
+    clock.now_s = 1.0
+    t_ms = read(reg.IR_DEVICE_TIME_MS, 4)[3]
+    assert t_ms == 100_000 % 65536
+    latched = counter()
+    assert latched == 10_001  # 100 s of device time at 10 ms, plus the conversion at 0
+    clock.now_s = 1.5  # 50 s of device time later, within the latch
+    wall.now_s = LATCH_S * 0.99
+    assert counter() == latched
+    wall.now_s = LATCH_S * 1.01  # the latch has expired: live again
+    assert counter() == 15_001
+    clock.now_s = 2.0
+    wall.now_s = 10.0
+    read(reg.IR_DEVICE_TIME_MS - 1, 2)  # any read that covers a clock register latches anew
+    assert counter() == 20_001
+    clock.now_s = 3.0
+    assert counter() == 20_001

@@ -413,6 +413,12 @@ def test_read_plan_with_device_clock_and_backoff_bounds() -> None:
     clock = dev.registers.clock
     assert clock is not None
     assert plan_with_device_time(touching, clock, 125) == (ReadRequest("input", 0, 6, ("device_time", "x")),)
+    # a clock that joins a later read moves that read to the front: values follow the time
+    later = (ReadRequest("holding", 0, 4, ("h",)), ReadRequest("input", 6, 10, ("y",)))
+    assert plan_with_device_time(later, clock, 125) == (
+        ReadRequest("input", 2, 14, ("device_time", "y")),
+        ReadRequest("holding", 0, 4, ("h",)),
+    )
     # a clock the map does not name is never read
     no_clock = dataclasses.replace(dev, registers=dataclasses.replace(dev.registers, clock=None))
     assert [(r.address, r.count) for r in device_plan(no_clock, 125, 15, clock=True)] == [(16, 33), (100, 16)]
