@@ -11,6 +11,7 @@ measured its material separately); everything else comes from the record.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -39,6 +40,8 @@ class HoldFit:
     log_rms: float
     time_s: FloatArray
     resistance_ohm: FloatArray
+    #: standard errors of ln E0, ln E1, ln mu1 (relative errors) from the fit's Jacobian
+    rel_sigma: tuple[float, float, float] = (math.nan, math.nan, math.nan)
 
 
 @dataclass(frozen=True)
@@ -80,6 +83,11 @@ def _holds(channel: ChannelRecord, level_n: float) -> tuple[FloatArray, FloatArr
         raise ValueError(f"the record has no hold at {level_n:g} N")
     breaks = np.flatnonzero(np.diff(idx) > 1)
     first = idx[: breaks[0] + 1] if breaks.size else idx
+    if first[0] == 0:
+        raise ValueError(
+            f"the record starts inside the {level_n:g} N hold: the load step's time is unknown "
+            "(start recording before the first load)"
+        )
     # a reading taken across the step (reference already at the level, resistance still
     # open) belongs before the step: the step happened after it
     lead = int(np.argmax(np.isfinite(channel.resistance_ohm[first])))
@@ -115,6 +123,7 @@ def fit_hold(channel: ChannelRecord, level_n: float, known: SensorParams) -> Hol
     lower = np.array([-5.0, -5.0, -5.0, 0.0])
     upper = np.array([5.0, 5.0, 5.0, max(gap, 1e-9)])
     fit = least_squares(residual, np.array([0.0, 0.0, 0.0, gap / 2]), bounds=(lower, upper), x_scale="jac")
+    sd = _hold_sigma(residual, fit.x, fit.fun, gap)
     return HoldFit(
         force_n=level_n,
         e0_pa=known.e0_pa * math.exp(fit.x[0]),
@@ -123,7 +132,36 @@ def fit_hold(channel: ChannelRecord, level_n: float, known: SensorParams) -> Hol
         log_rms=float(np.sqrt(np.mean(fit.fun**2))),
         time_s=t + fit.x[3],
         resistance_ohm=r,
+        rel_sigma=(float(sd[0]), float(sd[1]), float(sd[2])),
     )
+
+
+def _hold_sigma(
+    residual: Callable[[FloatArray], FloatArray], x: FloatArray, fun: FloatArray, gap: float
+) -> FloatArray:
+    """Standard errors of ln E0, ln E1, ln mu1: the noise's (Jacobian at the fit, onset held)
+    and the onset's, which the data barely pin down inside the sampling gap: the moduli refitted
+    with the onset at either end of the gap, their spread taken as uniform (range / sqrt 12)."""
+    n = fun.size
+    dof = max(n - 4, 1)
+    s2 = float(fun @ fun) / dof
+    jac = np.empty((n, 3))
+    for i in range(3):
+        up, down = x.copy(), x.copy()
+        up[i] += 1e-5
+        down[i] -= 1e-5
+        jac[:, i] = (residual(up) - residual(down)) / 2e-5
+    noise_var = np.diag(np.linalg.pinv(jac.T @ jac)) * s2
+    ends = []
+    for onset in (0.0, max(gap, 1e-9)):
+
+        def at_onset(y: FloatArray, onset: float = onset) -> FloatArray:
+            return residual(np.array([y[0], y[1], y[2], onset]))
+
+        box = (np.full(3, -5.0), np.full(3, 5.0))
+        ends.append(least_squares(at_onset, x[:3], bounds=box, x_scale="jac").x)
+    onset_var = ((ends[1] - ends[0]) / math.sqrt(12.0)) ** 2
+    return np.asarray(np.sqrt(np.clip(noise_var, 0.0, None) + onset_var))
 
 
 def _line(x: FloatArray, y: FloatArray) -> LinearLaw:
@@ -259,13 +297,15 @@ def write_outputs(result: PaperResult, out_dir: Path, source: str) -> list[Path]
         "# The paper's experiments, replayed on the simulated array",
         "",
         f"Records: {source}. R0 = {t.r0_ohm:.4g} ohm and rho2 = {t.rho2_ohm_m:.4g} ohm m are taken as known;",
-        "E0, E1 and mu1 are fitted per creep test with eq. 17 and then as lines in force (eq. 19).",
+        "E0, E1 and mu1 are fitted per creep test with eq. 17 and then as lines in force (eq. 19);",
+        "sigma: each one's standard error from the fit (how well the record's sampling and noise",
+        "pin it down).",
         "",
         "## Per-force coefficients (Fig. 6b)",
         "",
         "| force (N) | E0 fitted (MPa) | E0 true | E1 fitted (MPa) | E1 true | mu1 fitted (GPa s) | mu1 true "
-        "| log-R RMS |",
-        "|---|---|---|---|---|---|---|---|",
+        "| log-R RMS | E0 sigma (%) | E1 sigma (%) | mu1 sigma (%) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for h in result.holds:
         f = h.force_n
@@ -273,7 +313,8 @@ def write_outputs(result: PaperResult, out_dir: Path, source: str) -> list[Path]
             f"| {f:g} | {h.e0_pa / 1e6:.3f} | {(t.e0_pa + t.e0_slope_pa_per_n * f) / 1e6:.3f} | "
             f"{h.e1_pa / 1e6:.2f} | {(t.e1_pa + t.e1_slope_pa_per_n * f) / 1e6:.2f} | "
             f"{h.mu1_pa_s / 1e9:.2f} | {(t.mu1_pa_s + t.mu1_slope_pa_s_per_n * f) / 1e9:.2f} | "
-            f"{h.log_rms:.4f} |"
+            f"{h.log_rms:.4f} | {100 * h.rel_sigma[0]:.2f} | {100 * h.rel_sigma[1]:.2f} | "
+            f"{100 * h.rel_sigma[2]:.2f} |"
         )
     laws = (
         ("E0 (Pa)", result.e0, t.e0_pa, t.e0_slope_pa_per_n),

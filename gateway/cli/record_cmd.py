@@ -137,7 +137,7 @@ async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, objec
         bus = bus_config_for("sim", "tcp", devices, host="127.0.0.1", port=sim.port, poll_interval_s=0.02)
         config = gateway_config_for([bus])
         durations = (
-            (creep.scenario.duration_s or 4810.0) / creep_cfg.speed,
+            (creep.scenario.duration_s or 5400.0) / creep_cfg.speed,
             (stair.scenario.duration_s or 610.0) / stair_cfg.speed,
         )
         await asyncio.gather(
@@ -163,7 +163,7 @@ def paper(out_dir: Path, speed: float) -> None:
     from ..model import SensorParams
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    click.echo(f"recording the creep tests and a staircase through Modbus (about {4810 / speed:.0f} s) ...")
+    click.echo(f"recording the creep tests and a staircase through Modbus (about {5400 / speed:.0f} s) ...")
     creep_path, stair_path, true = asyncio.run(_paper_records(out_dir, speed))
     assert isinstance(true, SensorParams)
     creep = read_record(creep_path, require_force=True).channel()

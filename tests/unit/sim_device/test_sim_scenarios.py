@@ -45,8 +45,11 @@ def test_holds_schedule() -> None:
 
 def test_creep_test_holds_the_paper_forces() -> None:
     s = Scenario.builtin("creep-test", LAYOUT)
-    levels = s.force_n(10.0 + 1200.0 * np.arange(4) + 300.0)[:, 0]
+    levels = s.force_n(600.0 + 1200.0 * np.arange(4) + 300.0)[:, 0]
     np.testing.assert_allclose(levels, [2.0, 4.0, 6.0, 8.0])
+    # unloaded for 600 s before each hold, the first included
+    np.testing.assert_allclose(s.force_n(np.array([0.0, 599.9, 1200.1, 1799.9, 5399.9]))[:, 0], 0.0)
+    assert s.duration_s == pytest.approx(600.0 + 4 * 1200.0)
 
 
 def test_discrepancy_is_rich() -> None:
