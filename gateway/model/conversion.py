@@ -69,7 +69,11 @@ def _finite(key: str, value: object, unit: str) -> float:
 
 @dataclass(frozen=True)
 class LineConversion:
-    """F = (1/R - n) / m over [force_min_n, force_max_n] (m in S/N, n in S, forces in N)."""
+    """F = (1/R - n) / m over [force_min_n, force_max_n] (m in S/N, n in S, forces in N).
+
+    With n < 0 the line's conductance is zero at F = -n/m: a sensor at rest would read that
+    force, so ``force_min_n`` must lie above it (an open or nearly open sensor then reads
+    0 N ``NO_CONTACT``)."""
 
     slope_s_per_n: float
     intercept_s: float
@@ -90,6 +94,16 @@ class LineConversion:
         if not high > low:
             raise ConversionError(
                 "force_max_n", f"{high!r} is out of range; allowed: (force_min_n = {low!r}, inf) N"
+            )
+        zero_n = -self.intercept_s / m
+        if not m * low + self.intercept_s > 0.0:
+            # below -n/m the line's conductance is <= 0: a sensor at rest (open, or a tiny
+            # conductance) would read about -n/m newtons instead of no contact
+            raise ConversionError(
+                "force_min_n",
+                f"{low!r} is out of range for this line (intercept_s = {self.intercept_s:.6g} S < 0): "
+                f"the line reaches zero conductance at {zero_n:.4g} N, so below it a sensor at rest "
+                f"would read a force; allowed: ({zero_n:.4g}, inf) N (calibrate writes 1.1 x that)",
             )
 
     @property

@@ -211,6 +211,7 @@ def test_a_changed_conversion_does_not_carry_creep_state() -> None:
         (lambda: LineConversion(M, math.inf, 0.05, 10.0), "intercept_s", "finite"),
         (lambda: LineConversion(M, N, 0.0, 10.0), "force_min_n", "(0, inf) N"),
         (lambda: LineConversion(M, N, 5.0, 5.0), "force_max_n", "(force_min_n = 5.0, inf) N"),
+        (lambda: LineConversion(M, -2e-5, 0.5, 10.0), "force_min_n", "zero conductance at 1 N"),
         (lambda: LookupConversion((1e3,), (1.0,)), "resistance_ohm", "at least 2 points"),
         (lambda: LookupConversion((1e3, 1e4), (1.0, 0.5, 0.2)), "force_n", "one per resistance"),
         (lambda: LookupConversion((1e3, 1e3), (2.0, 1.0)), "resistance_ohm[1]", "strictly increasing"),
@@ -232,3 +233,21 @@ def test_conversions_refuse_values_outside_their_ranges(build: object, key: str,
 def test_a_channel_refuses_something_that_is_not_a_conversion() -> None:
     with pytest.raises(ConfigError, match="conversion: expected None, LineConversion or LookupConversion"):
         ChannelConfig(0, "ch00", 0.0, 0.0, True, PAPER_EFFECTS, SensorParams(), None, (M, N))  # type: ignore[arg-type]
+
+
+def test_a_line_with_a_negative_intercept_reads_no_contact_at_rest() -> None:
+    """C = m F + n with n < 0 (the paper's staircase line: n = -1.79e-5 S): with force_min_n
+    above -n/m = 1 N, an open sensor and a nearly open one (10 Mohm) read 0 N no contact, and a
+    loaded one reads (1/R - n)/m."""
+    line = LineConversion(slope_s_per_n=M, intercept_s=-2e-5, force_min_n=1.1, force_max_n=10.0)
+    conv = ConversionSet([line])
+    r = np.array([math.inf])
+    for resistance, force, code in (
+        (math.inf, 0.0, ForceStatus.NO_CONTACT),
+        (1e7, 0.0, ForceStatus.NO_CONTACT),
+        (1.0 / (M * 3.0 - 2e-5), 3.0, ForceStatus.OK),
+    ):
+        r[0] = resistance
+        f, status = np.zeros(1), np.zeros(1, dtype=np.int8)
+        conv.apply(r, f, status)
+        assert f[0] == pytest.approx(force) and status[0] == code, resistance
