@@ -18,7 +18,8 @@ A YAML file in the Prometheus exporter-toolkit format (the subset the gateway su
 every hash must be a bcrypt hash that bcrypt accepts. ``BasicAuth`` checks an
 ``Authorization`` header against the bcrypt hashes (a verified pair is cached). An unknown
 user costs one bcrypt check at the highest cost of the configured hashes, as a wrong password
-for a real one does; passwords are cut to bcrypt's 72 bytes, as Go's bcrypt (exporter-toolkit)
+for a real one does (a user whose hash is cheaper has its "no" padded with dummy checks to the
+same bcrypt work); passwords are cut to bcrypt's 72 bytes, as Go's bcrypt (exporter-toolkit)
 and bcrypt before 5.0 do, so any length gets a plain "no".
 """
 
@@ -254,8 +255,10 @@ class BasicAuth:
         self._lock = threading.Lock()
         #: the cost of the dummy hash: that of the dearest configured hash
         self.dummy_cost = max((bcrypt_cost(h) for h in self._users.values()), default=4)
-        # a salt at that cost and a hash no password gives (bcrypt only recomputes and compares)
-        self._dummy = bcrypt.gensalt(rounds=self.dummy_cost) + b"." * 31
+        # salts at each cost up to that one, with a hash no password gives (bcrypt only
+        # recomputes and compares)
+        self._dummies = {c: bcrypt.gensalt(rounds=c) + b"." * 31 for c in range(4, self.dummy_cost + 1)}
+        self._dummy = self._dummies[self.dummy_cost]
 
     @staticmethod
     def _credentials(header: str | None) -> tuple[str, bytes] | None:
@@ -301,6 +304,11 @@ class BasicAuth:
                 bcrypt.checkpw(secret, self._dummy)  # as dear as a real user's check
                 return False
             ok = bcrypt.checkpw(secret, hashed)
+            if not ok:
+                # a cheaper hash's "no" is padded to the dearest one's work: 2^c + 2^c + ...
+                # + 2^(max-1) = 2^max, so no configured user answers faster than an unknown one
+                for cost in range(bcrypt_cost(hashed), self.dummy_cost):
+                    bcrypt.checkpw(secret, self._dummies[cost])
         except ValueError:  # not expected: hashes are checked at load, passwords cut to 72 bytes
             return False
         if ok:

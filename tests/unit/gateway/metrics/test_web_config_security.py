@@ -44,6 +44,15 @@ def test_an_unknown_user_costs_the_bcrypt_work_of_a_real_one(bcrypt_costs: list[
     assert not auth.check(header("nobody", "wrong"))
     assert not auth.check(header("admin", "s3cret"))
     assert bcrypt_costs == [9, 9, 9]  # the unknown users cost the dearest configured hash
+    # a wrong password for the cheaper user is padded to the same work: 2^4 + 2^4 + ... + 2^8 = 2^9
+    bcrypt_costs.clear()
+    assert not auth.check(header("ci", "wrong"))
+    assert bcrypt_costs == [4, 4, 5, 6, 7, 8]
+    assert sum(2**c for c in bcrypt_costs) == 2**9
+    # a right password is not padded (it reveals nothing an attacker did not know)
+    bcrypt_costs.clear()
+    assert auth.check(header("ci", "other"))
+    assert bcrypt_costs == [4]
 
 
 def _fastest(check: Callable[[], object], tries: int = 4) -> float:
