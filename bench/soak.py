@@ -9,7 +9,8 @@ sends SIGHUP every ``RELOAD_EVERY_S`` and scrapes ``/metrics`` every second (eac
 connection that goes away).
 
 It reports, every minute and at the end:
-* RSS (MB), open fds and threads, sampled every 5 s; growth after warm-up (the first quarter)
+* RSS (MB), open fds and threads, sampled every 5 s, and the gateway's asyncio tasks
+  (``tactile_gateway_asyncio_tasks``, scraped); growth after warm-up (the first quarter)
   by a least-squares slope, extrapolated per hour;
 * the polls: successful reads, read errors by reason, and the reads that are neither;
 * after each recovery from a fault, the largest |force - reference| over channels once
@@ -97,7 +98,7 @@ def _proc(pid: int) -> tuple[float, int, int]:
     return rss_kb / 1024.0, fds, threads
 
 
-_SAMPLE = re.compile(r"^(\w+)\{([^}]*)\} (\S+)$")
+_SAMPLE = re.compile(r"^(\w+)(?:\{([^}]*)\})? (\S+)$")
 
 
 def _scrape(port: int) -> dict[tuple[str, str], float]:
@@ -107,7 +108,7 @@ def _scrape(port: int) -> dict[tuple[str, str], float]:
     for line in text.splitlines():
         m = _SAMPLE.match(line)
         if m:
-            out[(m.group(1), m.group(2))] = float(m.group(3))
+            out[(m.group(1), m.group(2) or "")] = float(m.group(3))
     return out
 
 
@@ -121,6 +122,8 @@ class Recovery:
 @dataclass
 class Soak:
     samples: list[tuple[float, float, int, int]] = field(default_factory=list)
+    #: (elapsed s, tasks alive in the gateway's event loop), from tactile_gateway_asyncio_tasks
+    tasks: list[tuple[float, float]] = field(default_factory=list)
     recoveries: list[Recovery] = field(default_factory=list)
     scrapes: int = 0
     scrape_failures: int = 0
@@ -185,6 +188,9 @@ def run(minutes: float) -> tuple[Soak, dict[tuple[str, str], float]]:
                     metrics = _scrape(metrics_port)
                     soak.scrapes += 1
                     final = metrics
+                    tasks = metrics.get(("tactile_gateway_asyncio_tasks", ""))
+                    if tasks is not None and (not soak.tasks or elapsed - soak.tasks[-1][0] >= 5.0):
+                        soak.tasks.append((elapsed, tasks))
                 except OSError:
                     soak.scrape_failures += 1
                     time.sleep(1.0)
@@ -239,6 +245,8 @@ def report(soak: Soak, final: dict[tuple[str, str], float], minutes: float) -> s
     rss = _growth_per_hour([(s[0], s[1]) for s in warm])
     fds = _growth_per_hour([(s[0], float(s[2])) for s in warm])
     threads = _growth_per_hour([(s[0], float(s[3])) for s in warm])
+    warm_start = warm[0][0] if warm else 0.0
+    tasks = _growth_per_hour([s for s in soak.tasks if s[0] >= warm_start])
     reads = final.get(("tactile_reads_total", 'device="arr"'), float("nan"))
     errors = {
         labels.split('reason="')[1].rstrip('"'): v
@@ -252,7 +260,13 @@ def report(soak: Soak, final: dict[tuple[str, str], float], minutes: float) -> s
         f"{soak.reloads} SIGHUP reloads",
         f"RSS {soak.samples[0][1]:.1f} -> {soak.samples[-1][1]:.1f} MB (after warm-up {rss:+.2f} MB/h), "
         f"fds {soak.samples[0][2]} -> {soak.samples[-1][2]} ({fds:+.1f}/h), "
-        f"threads {soak.samples[0][3]} -> {soak.samples[-1][3]} ({threads:+.1f}/h)",
+        f"threads {soak.samples[0][3]} -> {soak.samples[-1][3]} ({threads:+.1f}/h), "
+        + (
+            f"asyncio tasks {soak.tasks[0][1]:.0f} -> {soak.tasks[-1][1]:.0f} "
+            f"(max {max(v for _, v in soak.tasks):.0f}, after warm-up {tasks:+.1f}/h)"
+            if soak.tasks
+            else "asyncio tasks: not scraped"
+        ),
         f"reads {reads:.0f}, successful polls {polls:.0f}, errors by reason: "
         + ", ".join(f"{k} {v:.0f}" for k, v in sorted(errors.items())),
         f"recoveries measured: {len(measured)} of {len(soak.recoveries)}; worst settled |force - reference| "

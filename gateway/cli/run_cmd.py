@@ -35,6 +35,7 @@ from ..config import (
     load_config,
 )
 from ..errors import ConfigError
+from ..metrics.event_loop import EventLoopCollector
 from ..metrics.exposition import SnapshotRegistry
 from ..metrics.server import MetricsServer
 from ..metrics.web_config import WebConfig, load_web_config
@@ -90,6 +91,7 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
     """Poll and serve until SIGTERM/SIGINT; SIGHUP reloads ``config_path``."""
     holder = SnapshotHolder()
     registry = SnapshotRegistry(holder.get)
+    registry.register(EventLoopCollector(asyncio.get_running_loop()))
     page = _page(holder, config, page_on)
     install = page.install if page is not None else None
     try:
