@@ -172,6 +172,18 @@ def _establish(client: mqtt.Client, session: _Session, should_stop: Callable[[],
     return True
 
 
+def _wait(seconds: float, should_stop: Callable[[], bool]) -> bool:
+    """Sleep ``seconds`` in short steps; True as soon as ``should_stop()`` (Ctrl-C during a
+    back-off of up to ``BACKOFF_MAX_S`` ends the subscriber at once)."""
+    deadline = time.monotonic() + seconds
+    while not should_stop():
+        left = deadline - time.monotonic()
+        if left <= 0.0:
+            return False
+        time.sleep(min(0.1, left))
+    return True
+
+
 def run_subscriber(
     settings: SubscribeSettings,
     on_message: Callable[[str, bytes], None],
@@ -197,7 +209,8 @@ def run_subscriber(
                 continue
             notice(f"lost the connection to {settings.where()} ({mqtt.error_string(rc)}); reconnecting")
             while not should_stop():
-                time.sleep(rng.uniform(0.0, backoff))
+                if _wait(rng.uniform(0.0, backoff), should_stop):
+                    break
                 try:
                     if _establish(client, session, should_stop):
                         notice(f"reconnected to {settings.where()}")

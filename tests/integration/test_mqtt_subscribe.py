@@ -5,8 +5,11 @@ in the record format, and the record reads back with the values the gateway expo
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import math
+import re
+import signal
 import subprocess
 import sys
 import time
@@ -19,7 +22,7 @@ import pytest
 from broker import Broker, make_tls_files
 from netutil import free_port
 
-from gateway.analysis.records import read_record
+from gateway.analysis.records import Record, read_record
 from gateway.config import load_config
 from gateway.mqtt.publisher import MqttPublisher
 from gateway.runtime.poller import Poller, SnapshotHolder
@@ -53,14 +56,14 @@ def _secret(path: Path, text: str) -> Path:
     return path
 
 
-def _gateway_config(tmp_path: Path, sim_port: int, broker_port: int, ca: Path) -> Path:
+def _gateway_config(tmp_path: Path, sim_port: int, broker_port: int, ca: Path, extra: str = "") -> Path:
     secret = _secret(tmp_path / "gw.pw", PASSWORD)
     path = tmp_path / "gateway.toml"
     path.write_text(
         f'[metrics]\naddress = "127.0.0.1:{free_port()}"\n\n'
         f'[mqtt]\nhost = "127.0.0.1"\nport = {broker_port}\nusername = "gw"\npassword_file = "{secret}"\n'
         f'gateway = "gw1"\ntopic_prefix = "lab/tactile"\nencoding = "binary"\n'
-        f'tls = {{ ca_file = "{ca}" }}\n\n'
+        f'tls = {{ ca_file = "{ca}" }}\n{extra}\n'
         f'[[bus]]\nname = "sim"\nkind = "tcp"\nhost = "127.0.0.1"\nport = {sim_port}\n'
         "poll_interval_s = 0.05\n\n"
         '[[bus.device]]\nname = "arr"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 4\ncolumns = 2\n'
@@ -117,6 +120,25 @@ def _expected_rows(snap: Any) -> dict[str, float]:
     return out
 
 
+def _assert_record_has_the_rows_of(record: Record, snaps: list[Any]) -> None:
+    """The record holds exactly the rows of these polls (the frames received), in order."""
+    t0 = snaps[0].device_time_s
+    assert t0 is not None, "the simulated array has a device clock"
+    for name in ["ch00", "ch01", "ch02", "ch03"]:
+        rows = [
+            (round(s.device_time_s - t0, 6), _expected_rows(s)[name])
+            for s in snaps
+            if name in _expected_rows(s)
+        ]
+        ch = record.channel(name) if rows else None
+        if ch is None:
+            assert name not in record.channels
+            continue
+        assert ch.n_samples == len(rows)
+        np.testing.assert_allclose(ch.time_s, [t for t, _ in rows], rtol=0, atol=1e-6)
+        assert ch.resistance_ohm.tolist() == [r for _, r in rows], name
+
+
 async def test_subscribe_records_50_binary_frames_that_read_back_as_published(
     tmp_path: Path, broker: Broker, tls_files: dict[str, Path]
 ) -> None:
@@ -164,28 +186,161 @@ async def test_subscribe_records_50_binary_frames_that_read_back_as_published(
     assert "force_n" not in out.read_text().splitlines()[len(record.metadata)], "no reference force"
     assert sum(c.n_samples for c in record.channels.values()) >= 150, "rows for (nearly) every channel"
     snaps = [exported.by_seq[s] for s in seqs]
-    t0 = snaps[0].device_time_s
-    assert t0 is not None, "the simulated array has a device clock"
-    for name in ["ch00", "ch01", "ch02", "ch03"]:
-        rows = [
-            (round(s.device_time_s - t0, 6), _expected_rows(s)[name])
-            for s in snaps
-            if name in _expected_rows(s)
-        ]
-        ch = record.channel(name) if rows else None
-        if ch is None:
-            assert name not in record.channels
-            continue
-        assert ch.n_samples == len(rows)
-        np.testing.assert_allclose(ch.time_s, [t for t, _ in rows], rtol=0, atol=1e-6)
-        assert ch.resistance_ohm.tolist() == [r for _, r in rows], name
-        # the frame's own values agree with the gateway's export at the same sequence number
+    _assert_record_has_the_rows_of(record, snaps)
+    # the frame's own values agree with the gateway's export at the same sequence number
     for f, s in zip(frames, snaps, strict=True):
         assert f["device_time_s"] == s.device_time_s
         assert f["total_force_n"] == pytest.approx(s.total_force_n)
         assert f["force_n"] == pytest.approx(
             [None if not np.isfinite(v) else float(np.float32(v)) for v in s.force_n], rel=1e-6
         )
+
+
+class _Lines:
+    """A child's output stream, read line by line as it comes (the child never blocks on it)."""
+
+    def __init__(self, stream: asyncio.StreamReader | None) -> None:
+        assert stream is not None
+        self.lines: list[str] = []
+        self.task = asyncio.create_task(self._read(stream))
+
+    async def _read(self, stream: asyncio.StreamReader) -> None:
+        while line := await stream.readline():
+            self.lines.append(line.decode().rstrip("\n"))
+
+
+SUMMARY = re.compile(r"(\d+) frame\(s\) from 1 device\(s\); (\d+) missing in (\d+) gap\(s\)(.*)")
+GAP = re.compile(r"gw1/arr: gap: (\d+) frame\(s\) missing before sequence (\d+)")
+
+
+async def test_subscribe_rides_out_a_broker_restart_and_counts_the_frames_lost_in_it(
+    tmp_path: Path, broker: Broker, tls_files: dict[str, Path]
+) -> None:
+    """The subscriber uses a clean session: the broker's persistence keeps nothing for it, so
+    after the restart it must subscribe again itself. The frames published while it was away
+    are lost to it, and its summary must count exactly those."""
+    ca = tls_files["ca.crt"]
+    where = f"127.0.0.1:{broker.port}"
+    array = SimArray(ArrayConfig(channels=4, columns=2, scenario="indentation", speed=5.0, seed=2))
+    out = tmp_path / "rec.csv"
+    async with serve_tcp([array], host="127.0.0.1", port=0) as server:
+        # a 20-frame queue at the gateway: an outage of more than a second must lose frames
+        path = _gateway_config(tmp_path, server.port, broker.port, ca, "queue_frames = 20\n")
+        config = load_config(path)
+        holder = SnapshotHolder()
+        exported = Exported()
+        holder.subscribe(exported)
+        publisher = MqttPublisher(config)
+        holder.subscribe(publisher.on_snapshot)
+        publisher.start()
+        proc: asyncio.subprocess.Process | None = None
+        readers: list[_Lines] = []
+        try:
+            async with Poller(config, holder):
+                assert await until(lambda: publisher.stats().published.get("arr", 0) >= 5, 20.0)
+                cmd = _subscribe_cmd(
+                    broker, tmp_path, ca, "--gateway", "gw1", "--device", "arr",
+                    "--out", str(out), "--json",
+                )  # fmt: skip
+                proc = await asyncio.create_subprocess_exec(
+                    *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE
+                )
+                stdout, stderr = _Lines(proc.stdout), _Lines(proc.stderr)
+                readers = [stdout, stderr]
+                running = proc
+
+                def seqs() -> list[int]:
+                    return [json.loads(line)["sequence"] for line in stdout.lines]
+
+                def said(text: str) -> list[str]:
+                    return [line for line in stderr.lines if text in line]
+
+                async def wait(cond: Callable[[], object], timeout_s: float, what: str) -> None:
+                    await until(lambda: bool(cond()) or running.returncode is not None, timeout_s)
+                    assert running.returncode is None, (
+                        f"the subscriber exited ({running.returncode}) waiting for {what}: {stderr.lines}"
+                    )
+                    assert cond(), f"no {what} in {timeout_s:g} s: {stderr.lines}"
+
+                await wait(lambda: len(stdout.lines) >= 20, 30.0, "20 frames")
+                n_before = len(stdout.lines)
+                dropped_before = publisher.stats().dropped.get("arr", 0)
+                broker.kill()
+                await wait(lambda: said("lost the connection"), 20.0, "notice of the lost connection")
+                # the gateway's queue overflows: frames that can never reach the subscriber
+                await wait(lambda: publisher.stats().dropped.get("arr", 0) > dropped_before, 20.0, "drops")
+                await asyncio.to_thread(broker.start)
+                await wait(
+                    lambda: said("reconnected to") and publisher.stats().connected, 60.0, "reconnection"
+                )
+                # both are connected and subscribed: every frame polled from now on is delivered
+                both_up = len(exported.by_seq)
+                dropped_up = publisher.stats().dropped.get("arr", 0)
+                await wait(lambda: seqs() and seqs()[-1] >= both_up + 20, 30.0, "frames after the restart")
+                proc.send_signal(signal.SIGINT)
+                await asyncio.wait_for(proc.wait(), 30.0)
+                dropped_end = publisher.stats().dropped.get("arr", 0)
+                await asyncio.wait_for(asyncio.gather(*(r.task for r in readers)), 10.0)
+        finally:
+            publisher.stop()
+            if proc is not None and proc.returncode is None:
+                proc.kill()
+                await proc.wait()
+            for r in readers:
+                r.task.cancel()
+            await asyncio.gather(*(r.task for r in readers), return_exceptions=True)
+    err = "\n".join(stderr.lines)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+
+    # stderr: the outage said once each way, with retries in between, then the gaps and the summary
+    lost_at = [i for i, s in enumerate(stderr.lines) if s.startswith(f"lost the connection to {where} (")]
+    back_at = [i for i, s in enumerate(stderr.lines) if s == f"reconnected to {where}"]
+    assert len(lost_at) == 1 and len(back_at) == 1 and lost_at[0] < back_at[0], err
+    assert stderr.lines[lost_at[0]].endswith("; reconnecting"), err
+    retries = [s for s in stderr.lines[lost_at[0] + 1 : back_at[0]] if s.endswith("; retrying")]
+    assert all(line.startswith(f"cannot connect to {where}") for line in retries), err
+    gap_lines = [GAP.fullmatch(line) for line in stderr.lines]
+    summary = SUMMARY.fullmatch(stderr.lines[-1])
+    assert summary is not None, err
+    unexpected = [
+        line
+        for k, line in enumerate(stderr.lines[:-1])
+        if k not in lost_at + back_at and line not in retries and gap_lines[k] is None
+    ]
+    assert unexpected == [], err
+    delivered, missing, gaps, extras = summary.groups()
+    assert "restart" not in extras and "undecodable" not in extras and "backwards" not in extras, err
+
+    # stdout: each frame once, in order; the gaps are the sequence numbers not received
+    frames = [json.loads(line) for line in stdout.lines]
+    got = [f["sequence"] for f in frames]
+    assert int(delivered) == len(got)
+    assert all(a < b for a, b in itertools.pairwise(got)), "strictly increasing, no repeats"
+    holes = [(b - a - 1, b) for a, b in itertools.pairwise(got) if b > a + 1]
+    assert [(int(m[1]), int(m[2])) for m in gap_lines if m is not None] == holes, err
+    assert int(gaps) == len(holes) >= 1
+    lost = sorted(set(range(got[0], got[-1] + 1)) - set(got))
+    assert int(missing) == sum(n for n, _ in holes) == len(lost)
+    # ... and they are those of the outage: none before the kill; at least those the gateway
+    # dropped in it (its 20-frame queue overflowed); once both were back only what the
+    # gateway may have dropped since (its client's queue is 20 messages too)
+    assert lost[0] > got[n_before - 1], (lost, n_before)
+    assert len([s for s in lost if s <= both_up]) >= dropped_up - dropped_before > 0, (lost, both_up)
+    assert len([s for s in lost if s > both_up]) <= dropped_end - dropped_up, (lost, both_up)
+    assert got[-1] >= both_up + 20
+
+    # the record: rows from before and after the outage, exactly those of the frames received
+    record = read_record(out)
+    assert record.metadata["source"] == "tactile-gateway subscribe"
+    snaps = [exported.by_seq[s] for s in got]
+    _assert_record_has_the_rows_of(record, snaps)
+    t0 = snaps[0].device_time_s
+    times = np.concatenate([c.time_s for c in record.channels.values()])
+    last_before = round(snaps[n_before - 1].device_time_s - t0, 6)
+    first_after = round(exported.by_seq[both_up + 1].device_time_s - t0, 6)
+    assert (times <= last_before + 1e-3).any() and (times >= first_after - 1e-3).any()
+    assert f"{sum(c.n_samples for c in record.channels.values())} rows to {out}" in extras
 
 
 def _run(cmd: list[str], timeout: float = 30.0) -> subprocess.CompletedProcess[str]:

@@ -268,3 +268,21 @@ def test_password_files(tmp_path: Path) -> None:
         read_password_file(pw)
     with pytest.raises(ConfigError, match="does not exist"):
         read_password_file(tmp_path / "nope")
+
+
+def test_a_stop_during_the_reconnect_back_off_ends_the_wait_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C while the broker is away: the back-off (up to 10 s) is slept in 0.1 s steps that
+    each look at the stop flag, not in one sleep that a SIGINT does not cut short."""
+    from gateway.mqtt import subscriber
+
+    slept: list[float] = []
+    monkeypatch.setattr(subscriber.time, "sleep", slept.append)
+    calls = iter([False, False, False, True])
+    assert subscriber._wait(10.0, lambda: next(calls)) is True
+    assert slept == [0.1, 0.1, 0.1]
+    # without a stop the whole wait is slept, in steps no longer than 0.1 s
+    slept.clear()
+    clock = iter(x * 0.1 for x in range(1000))
+    monkeypatch.setattr(subscriber.time, "monotonic", lambda: next(clock))
+    assert subscriber._wait(0.35, lambda: False) is False
+    assert len(slept) == 3 and max(slept) <= 0.1
