@@ -28,6 +28,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--hogs", type=int, default=os.cpu_count() or 2)
+    parser.add_argument(
+        "--log-dir", default="stress-logs", help="where a failed round's full pytest output is kept"
+    )
     args, pytest_args = parser.parse_known_args(argv)
     results: list[tuple[int, int, float, str]] = []
     for round_no in range(1, args.rounds + 1):
@@ -65,6 +68,12 @@ def main(argv: list[str] | None = None) -> int:
         )
         for line in failed:
             print(f"  {line}", flush=True)
+        if run.returncode != 0:
+            os.makedirs(args.log_dir, exist_ok=True)
+            log_path = os.path.join(args.log_dir, f"round-{round_no}.log")
+            with open(log_path, "w", encoding="utf-8") as log:
+                log.write(run.stdout + run.stderr)
+            print(f"  full output: {log_path}", flush=True)
     bad = [r for r in results if r[1] != 0]
     print(f"stress test: {len(results) - len(bad)} of {len(results)} rounds passed under load")
     return 1 if bad else 0

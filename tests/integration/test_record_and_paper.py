@@ -111,7 +111,18 @@ def test_an_interrupted_recording_is_a_valid_record(tmp_path: Path, sim: int) ->
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(3.0)
+    # interrupt once rows are on disk (the file is flushed as it goes), not after a fixed sleep:
+    # on a busy machine 3 s may not even cover the start-up
+    def data_rows() -> int:
+        if not out.exists():
+            return 0
+        lines = out.read_text().splitlines()
+        return sum(1 for line in lines if line and not line.startswith("#")) - 1
+
+    deadline = time.monotonic() + 60.0
+    while data_rows() <= 25 and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the recording ended before it was interrupted"
     proc.send_signal(signal.SIGINT)
     _, stderr = proc.communicate(timeout=30)
     assert proc.returncode == 0, stderr
