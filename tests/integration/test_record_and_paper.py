@@ -111,6 +111,7 @@ def test_an_interrupted_recording_is_a_valid_record(tmp_path: Path, sim: int) ->
         stderr=subprocess.PIPE,
         text=True,
     )
+
     # interrupt once rows are on disk (the file is flushed as it goes), not after a fixed sleep:
     # on a busy machine 3 s may not even cover the start-up
     def data_rows() -> int:
