@@ -4,10 +4,13 @@ The physical model (``fitting.fit_channel``, drift-corrected inversion) is fitte
 residuals weighted by the record's measurement model (``measurement``), over the force range
 the record spans (written to the calibration file as ``force_min_n``/``force_max_n``). When the
 record has loading and unloading, ``hysteresis`` is tried and kept only if it reads the
-held-out force better. The paper's conductance line C = m F + n and a monotone lookup
-(``rivals``) are fitted on the same training rows and judged on the same held-out rows; the
-report says plainly which reads force best, and ``model="line"|"lookup"|"auto"`` writes a
-rival as the channel's model (``docs/calibration.md``).
+held-out force better. Two objectives are fitted (``objectives``): log-resistance (the
+measurement model's) and force, started from the log-R result; ``objective="auto"`` keeps the
+one that reads held-out force better. A reference-force zero offset is fitted too
+(``force_offset="auto"`` keeps it only if it reads held-out force better; held-out force
+errors are then against F_ref + offset). The paper's conductance line C = m F + n and a
+monotone lookup (``rivals``) are fitted and judged on the same rows; the report says which
+reads force best, and ``model="line"|"lookup"|"auto"`` writes it (``docs/calibration.md``).
 """
 
 from __future__ import annotations
@@ -21,15 +24,19 @@ from typing import Any
 import numpy as np
 
 from ..atomic import atomic_write_text
-from ..model import SensorParams, parameter_names, parse_effects
+from ..model import EFFECT_PARAMETERS, SensorParams, parameter_names, parse_effects
 from .diagnostics import residual_axes
 from .discrepancy import decimate
 from .fitting import FitData, FitResult, fit_channel
 from .measurement import NoiseModel, noise_model, time_is_real
+from .objectives import OFFSET
 from .records import ChannelRecord
-from .rivals import Rivals, verdict
+from .rivals import Rivals, line_range_lines, verdict
 
 MODELS = ("physics", "line", "lookup", "auto")
+OBJECTIVE_CHOICES = ("auto", "log_r", "force")
+OFFSET_CHOICES = ("auto", "fit", "none")
+OBJECTIVE_WORDS = {"log_r": "log-R", "force": "force"}
 TIME_EFFECTS = ("creep", "creep2")
 
 
@@ -45,10 +52,15 @@ class Calibration:
     noise: NoiseModel
     noise_floor_log: float
     noise_floor_force_n: float
-    force_range_n: tuple[float, float]
+    force_range_n: tuple[float, float]  # the physical model's: the record's range + offset
     configured_range_n: tuple[float, float]
     rows_outside_configured: int
     fit_before: FitResult | None = None  # the fit without hysteresis, when hysteresis was tried
+    #: the other objective's best fit (None when only one objective was fitted)
+    other: FitResult | None = None
+    objective_mode: str = "log_r"
+    offset_mode: str = "none"
+    record_range_n: tuple[float, float] = (math.nan, math.nan)  # the record's loaded range, as F_ref
     notes: tuple[str, ...] = field(default=())
     warnings: tuple[str, ...] = field(default=())
 
@@ -73,6 +85,23 @@ class Calibration:
     @property
     def verdict(self) -> str:
         return verdict(self.fit.gap_test.force_rms_n, self.rivals.line_force_rms_n)
+
+    def offset_dict(self) -> dict[str, Any]:
+        """The reference zero offset: fitted or not, value and 95 % interval."""
+        out: dict[str, Any] = {"mode": self.offset_mode, "fitted": False, "value_n": self.fit.force_offset_n}
+        try:
+            e = self.fit.estimate(OFFSET)
+        except KeyError:
+            return out
+        out.update(fitted=e.fitted, value_n=e.value, ci95_low=e.low, ci95_high=e.high)
+        out["held_out_against"] = "the offset-corrected reference F_ref + force_offset_n"
+        return out
+
+    def offset_words(self) -> str:
+        """The fitted zero offset with its interval in words ('' when there is none)."""
+        o = self.offset_dict()
+        interval = f"[{o.get('ci95_low', 0.0):+.4g}, {o.get('ci95_high', 0.0):+.4g}]"
+        return f"{o['value_n']:+.4g} N, 95 % {interval}" if o["fitted"] else ""
 
     def as_dict(self) -> dict[str, Any]:
         fit = self.fit
@@ -119,6 +148,15 @@ class Calibration:
             "notes": list(self.notes),
             "warnings": list(self.warnings),
         }
+        other = self.other
+        out["objective"] = {
+            "used": fit.objective,
+            "requested": self.objective_mode,
+            "held_out_force_rms_n": {f.objective: f.gap_test.force_rms_n for f in (fit, other) if f},
+            "other": other and {"objective": other.objective, "effects": list(other.effects)},
+        }
+        out["force_offset"] = self.offset_dict()
+        out["record_force_range_n"] = list(self.record_range_n)
         if self.fit_before is not None:
             out["without_hysteresis"] = {
                 "effects": list(self.fit_before.effects),
@@ -144,8 +182,21 @@ def calibrate(
     record_name: str = "",
     metadata: Mapping[str, str] | None = None,
     try_hysteresis: bool = True,
+    objective: str = "auto",
+    force_offset: str = "auto",
 ) -> Calibration:
-    """Fit the model and its rivals to one channel of a record."""
+    """Fit the model and its rivals to one channel of a record.
+
+    ``objective``: ``"log_r"`` fits log-resistance residuals (the measurement model's);
+    ``"force"`` also fits force-space residuals, started from the log-R result, and keeps those;
+    ``"auto"`` fits both and keeps the one with the lower held-out force RMS. ``force_offset``:
+    ``"fit"`` fits a reference zero offset, ``"auto"`` fits it and keeps it only if it lowers the
+    held-out force RMS, ``"none"`` leaves it out. Held-out force errors of a fit with an offset
+    are against F_ref + offset (the same as F_inv - offset against F_ref)."""
+    if objective not in OBJECTIVE_CHOICES:
+        raise ValueError(f"objective must be one of {', '.join(OBJECTIVE_CHOICES)}, got {objective!r}")
+    if force_offset not in OFFSET_CHOICES:
+        raise ValueError(f"force_offset must be one of {', '.join(OFFSET_CHOICES)}, got {force_offset!r}")
     meta = dict(metadata or {})
     prior = prior or SensorParams()
     notes: list[str] = []
@@ -184,25 +235,23 @@ def calibrate(
         warnings.append(
             f"the record's forces reach {hi:.4g} N, above the configured force_max_n = {configured[1]:g} N: "
             f"{outside} rows would read as saturated (capped); the fit uses and writes the record's "
-            f"range {lo:.3g}-{hi:.4g} N"
+            f"range {lo:.3g}-{hi:.4g} N (+ the zero offset, when one is fitted)"
         )
     ranged = replace(prior, force_min_n=min(lo, hi * 0.999), force_max_n=hi)
-    fit = fit_channel(data, chosen, ranged)
-    before = None
-    if try_hysteresis and "hysteresis" not in chosen and has_both_directions(data):
-        with_h = fit_channel(data, (*chosen, "hysteresis"), ranged)
-        before = fit
-        if with_h.gap_test.force_rms_n < fit.gap_test.force_rms_n:
-            fit = with_h
-            notes.append(
-                "hysteresis added (the record loads and unloads): held-out force RMS "
-                f"{before.gap_test.force_rms_n:.4g} -> {with_h.gap_test.force_rms_n:.4g} N"
-            )
-        else:
-            notes.append(
-                "hysteresis tried (the record loads and unloads) and left out: held-out force RMS "
-                f"{fit.gap_test.force_rms_n:.4g} N without, {with_h.gap_test.force_rms_n:.4g} N with it"
-            )
+    try_h = try_hysteresis and "hysteresis" not in chosen and has_both_directions(data)
+    runs = [_fit_objective(data, chosen, ranged, "log_r", force_offset, try_h, None)]
+    if objective != "log_r":
+        runs.append(_fit_objective(data, chosen, ranged, "force", force_offset, try_h, runs[0]))
+    for run in runs:
+        notes += run.notes
+    pick = runs[-1] if objective == "force" else min(runs, key=lambda r: _rms(r.fit))
+    fit, other = pick.fit, next((r.fit for r in runs if r is not pick), None)
+    if other is not None:
+        notes.append(
+            f"objective: {OBJECTIVE_WORDS[fit.objective]} ({objective} requested): "
+            f"held-out force RMS {fit.gap_test.force_rms_n:.4g} N, the {OBJECTIVE_WORDS[other.objective]} "
+            f"objective's {other.gap_test.force_rms_n:.4g} N"
+        )
     rivals = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test)
     test = data.test
     return Calibration(
@@ -214,13 +263,104 @@ def calibrate(
         noise=noise,
         noise_floor_log=noise.floor_log(test),
         noise_floor_force_n=rivals.force_noise_floor_n(noise.sigma_log[test], data.resistance_ohm[test]),
-        force_range_n=(ranged.force_min_n, ranged.force_max_n),
+        force_range_n=(fit.params.force_min_n, fit.params.force_max_n),
+        record_range_n=(ranged.force_min_n, ranged.force_max_n),
         configured_range_n=configured,
         rows_outside_configured=outside,
-        fit_before=before,
+        fit_before=pick.before,
+        other=other,
+        objective_mode=objective,
+        offset_mode=force_offset,
         notes=tuple(notes),
         warnings=tuple(warnings),
     )
+
+
+@dataclass(frozen=True)
+class _Run:
+    """One objective's fits: the kept one, and the ones a next objective starts from."""
+
+    fit: FitResult
+    before: FitResult | None  # without hysteresis, when hysteresis was tried
+    plain: FitResult
+    with_h: FitResult | None
+    notes: tuple[str, ...]
+
+
+def _rms(fit: FitResult) -> float:
+    v = fit.gap_test.force_rms_n
+    return v if math.isfinite(v) else math.inf
+
+
+def _fit_objective(
+    data: FitData,
+    effects: tuple[str, ...],
+    ranged: SensorParams,
+    objective: str,
+    force_offset: str,
+    try_h: bool,
+    start: _Run | None,
+) -> _Run:
+    """Fit one objective, with hysteresis tried and the offset as ``force_offset`` says; a
+    run of another objective (``start``) gives the starting parameters."""
+
+    def at(base: FitResult | None, **reset: float) -> tuple[SensorParams, float]:
+        """A start: the prior, or a fit's parameters with the record's range (its own is shifted)."""
+        if base is None:
+            return ranged, 0.0
+        p = replace(base.params, force_min_n=ranged.force_min_n, force_max_n=ranged.force_max_n, **reset)
+        return p, base.force_offset_n
+
+    def run(eff: tuple[str, ...], starts: list[tuple[SensorParams, float]], offset: bool) -> FitResult:
+        """The fit from each start; the lower objective wins (the force objective has local minima)."""
+        fits = [
+            fit_channel(data, eff, p, objective=objective, fit_force_offset=offset, force_offset_n=o * offset)
+            for p, o in starts
+        ]
+        return min(fits, key=lambda f: f.cost if math.isfinite(f.cost) else math.inf)
+
+    word, notes, fo = OBJECTIVE_WORDS[objective], [], force_offset == "fit"
+    # the force objective starts from the log-R fit and from the prior; with hysteresis, from the
+    # log-R fit with hysteresis and from its own fit without, hysteresis at the prior
+    fit = plain = run(effects, [at(None)] if start is None else [at(start.plain), at(None)], fo)
+    before = with_h = None
+    if try_h:
+        prior_h = {k: getattr(ranged, k) for k in EFFECT_PARAMETERS["hysteresis"]}
+        starts = [at(None)] if start is None else [at(start.with_h or start.plain), at(plain, **prior_h)]
+        with_h = run((*effects, "hysteresis"), starts, fo)
+        before = plain
+        a, b = plain.gap_test.force_rms_n, with_h.gap_test.force_rms_n
+        if _rms(with_h) < _rms(plain):
+            fit = with_h
+            notes.append(
+                f"{word} objective: hysteresis added (the record loads and unloads): held-out force RMS "
+                f"{a:.4g} -> {b:.4g} N"
+            )
+        else:
+            notes.append(
+                f"{word} objective: hysteresis tried (the record loads and unloads) and left out: held-out "
+                f"force RMS {a:.4g} N without, {b:.4g} N with it"
+            )
+    if force_offset == "auto":
+        with_off = run(fit.effects, [at(fit)], True)
+        e = with_off.estimate(OFFSET)
+        what = f"{e.value:+.4g} N, 95 % [{e.low:+.4g}, {e.high:+.4g}]" if e.fitted else e.note
+        a, b = fit.gap_test.force_rms_n, with_off.gap_test.force_rms_n
+        lost = sorted(set(with_off.fixed_reasons) - set(fit.fixed_reasons) - {OFFSET})
+        if lost:
+            what += f"; it leaves {', '.join(lost)} undetermined"
+        if e.fitted and not lost and _rms(with_off) < _rms(fit):
+            notes.append(
+                f"{word} objective: reference zero offset fitted and kept ({what}): held-out force RMS "
+                f"{a:.4g} -> {b:.4g} N (against F_ref + offset)"
+            )
+            fit = with_off
+        else:
+            notes.append(
+                f"{word} objective: reference zero offset fitted ({what}) and left out: held-out force "
+                f"RMS {a:.4g} N without, {b:.4g} N with it"
+            )
+    return _Run(fit, before, plain, with_h, tuple(notes))
 
 
 def calibration_toml(
@@ -237,17 +377,26 @@ def calibration_toml(
     if items:
         effects = ", ".join(f'"{e}"' for e in items[0].fit.effects)
         lines += ["", "[meta]", f'record = "{items[0].record}"', f"effects = [{effects}]"]
+        lines += [
+            f"# reference zero offset fitted: {c.offset_words()} ({rename.get(c.channel, c.channel)}: "
+            "its force_min_n/force_max_n are the record's range + offset)"
+            for c in items
+            if c.offset_words()
+        ]
     known = set(parameter_names())
     rivals: list[str] = []
     for cal in items:
         name = rename.get(cal.channel, cal.channel)
         kind = cal.best if model == "auto" else model
         lines += ["", f'[channel."{name}"]', f"# model: {kind} ({cal.verdict})"]
+        lines.append(f"# parameters fitted with the {OBJECTIVE_WORDS[cal.fit.objective]} objective")
         for est in cal.fit.estimates:
             if est.name in known:
                 lines.append(f"{est.name} = {_toml_float(est.value)}")
-        lines.append(f"force_min_n = {_toml_float(cal.force_range_n[0])}")
-        lines.append(f"force_max_n = {_toml_float(cal.force_range_n[1])}")
+        # a rival reads F_ref, so its channel keeps the record's own range
+        low, high = cal.force_range_n if kind == "physics" else cal.record_range_n
+        lines.append(f"force_min_n = {_toml_float(low)}")
+        lines.append(f"force_max_n = {_toml_float(high)}")
         if kind == "line":
             rivals += [
                 "",
@@ -255,6 +404,7 @@ def calibration_toml(
                 f"slope_s_per_n = {_toml_float(cal.rivals.line.slope_s_per_n)}",
                 f"intercept_s = {_toml_float(cal.rivals.line.intercept_s)}",
                 f"held_out_force_rms_n = {_toml_float(cal.rivals.line_force_rms_n)}",
+                *line_range_lines(cal.rivals.line, low),
             ]
         elif kind == "lookup":
             lk = cal.rivals.lookup
@@ -292,6 +442,17 @@ def format_report(cal: Calibration) -> str:
         f"force range fitted and written: {lo:.3g}-{hi:.4g} N (configured {cal.configured_range_n[0]:g}-"
         f"{cal.configured_range_n[1]:g} N; {cal.rows_outside_configured} rows outside it, none capped in "
         "the fit-quality numbers)"
+        + (
+            f"; the record's {cal.record_range_n[0]:.3g}-{cal.record_range_n[1]:.4g} N "
+            f"+ the zero offset {cal.offset_words()}"
+            if cal.offset_words()
+            else ""
+        )
+    )
+    out.append(
+        f"fit objective: {OBJECTIVE_WORDS[fit.objective]} (requested: {cal.objective_mode}; zero offset: "
+        f"{cal.offset_mode}); held-out force errors are against "
+        + ("F_ref + offset" if cal.offset_words() else "F_ref")
     )
     out += [f"WARNING: {w}" for w in cal.warnings]
     out += [f"note: {n}" for n in cal.notes]
@@ -323,6 +484,9 @@ def format_report(cal: Calibration) -> str:
         f"  physical model (drift-corrected) {fit.gap_test.log_resistance_rms:>18.4f} "
         f"{fit.gap_test.force_rms_n:>15.4f}"
     )
+    if cal.other is not None:
+        g, word = cal.other.gap_test, f"  physical model, {OBJECTIVE_WORDS[cal.other.objective]} objective"
+        out.append(f"{word:<35}{g.log_resistance_rms:>16.4f} {g.force_rms_n:>15.4f}")
     out.append(f"  conductance line C = m F + n     {'-':>18} {cal.rivals.line_force_rms_n:>15.4f}")
     out.append(f"  monotone lookup F(ln R)          {'-':>18} {cal.rivals.lookup_force_rms_n:>15.4f}")
     out.append(

@@ -116,7 +116,8 @@ def plot_calibration(cal: Any, channel: Any, out_dir: Path) -> list[Path]:
         cal.noise.sigma_log if cal.noise.sigma_log.size == data.time_s.size else data.sigma_log,
     )
     predicted = {
-        "model": cal.fit.force_inverted_n,
+        # against F_ref: a fit with a zero offset reads F_ref + offset
+        "model": cal.fit.force_inverted_n - cal.fit.force_offset_n,
         "line": cal.rivals.line.force(data.resistance_ohm),
         "lookup": cal.rivals.lookup.force(data.resistance_ohm),
     }

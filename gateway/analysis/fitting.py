@@ -1,11 +1,14 @@
 """Fitting a channel's model to a measurement record (shared by calibration and discrepancy).
 
-The fit minimises log-resistance residuals, ln R_measured - ln R_model, where the model is
-driven by the record's reference force history (the creep state needs the whole history,
-unusable rows included). Positive parameters are fitted as ln(p / prior) and force slopes
-as (slope / scale), which makes the problem well scaled; ``scipy.optimize.least_squares``
-runs with bounds and a soft-L1 robust loss. Confidence intervals come from the Jacobian at
-the solution. Gaps are measured on held-out segments of the timeline that the fit never saw.
+By default the fit minimises log-resistance residuals, ln R_measured - ln R_model, where the
+model is driven by the record's reference force history (the creep state needs the whole
+history, unusable rows included); ``objective="force"`` divides them by the model's
+sensitivity d ln R / dF so that they are force errors, and ``fit_force_offset=True`` adds a
+reference-force zero offset (``objectives``). Positive parameters are fitted as ln(p / prior)
+and force slopes as (slope / scale), which makes the problem well scaled;
+``scipy.optimize.least_squares`` runs with bounds and a soft-L1 robust loss. Confidence
+intervals come from the Jacobian at the solution. Gaps are measured on held-out segments of
+the timeline that the fit never saw.
 """
 
 from __future__ import annotations
@@ -20,21 +23,20 @@ from scipy.optimize import least_squares
 
 from ..model import EFFECT_PARAMETERS, ForceStatus, SensorModel, SensorParams, parse_effects
 from ..model.params import PARAMETER_RANGES
+from .objectives import (
+    LINEAR_PARAMETERS,
+    OFFSET,
+    OFFSET_SCALE,
+    Problem,
+    check_objective,
+    f_scale,
+    offset_bounds,
+)
 from .records import ChannelRecord
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-#: Parameters fitted on a linear scale (they may be zero); the rest are fitted in log space.
-LINEAR_PARAMETERS: dict[str, float] = {
-    "e0_slope_pa_per_n": 1e6,
-    "e1_slope_pa_per_n": 1e7,
-    "mu1_slope_pa_s_per_n": 1e9,
-    "temperature_coeff_per_k": 0.01,
-    "series_resistance_ohm": 1e3,
-}
-#: log-space half-width of the bounds: a factor of 1000 either way of the prior.
-LOG_BOUND = math.log(1e3)
 Z95 = 1.959963984540054
 HELD_OUT_BLOCKS = 20  # the timeline is cut in this many blocks; every fourth is held out
 
@@ -79,7 +81,13 @@ class FitResult:
     fixed_reasons: dict[str, str] = field(default_factory=dict)
     log_residual: FloatArray = field(default_factory=lambda: np.zeros(0))
     model_ohm: FloatArray = field(default_factory=lambda: np.zeros(0))
+    #: the inverted force on every row; it reads F_ref + force_offset_n (the offset-corrected reference)
     force_inverted_n: FloatArray = field(default_factory=lambda: np.zeros(0))
+    objective: str = "log_r"
+    #: reference zero offset: the model is driven by F_ref + force_offset_n (0 unless fitted or given)
+    force_offset_n: float = 0.0
+    #: the robust objective at the solution (training rows): compares fits of one objective
+    cost: float = math.nan
 
     def estimate(self, name: str) -> ParameterEstimate:
         for e in self.estimates:
@@ -207,70 +215,6 @@ def _hold_durations(time_s: FloatArray, force_n: FloatArray) -> list[tuple[float
     return runs
 
 
-class _Problem:
-    """The least-squares problem of one fit."""
-
-    def __init__(self, data: FitData, effects: tuple[str, ...], prior: SensorParams, names: tuple[str, ...]):
-        self.data = data
-        self.effects = effects
-        self.prior = prior
-        self.names = names
-        self.force = data.force_n[:, None]
-        self.temp = None if data.temperature_c is None else data.temperature_c[:, None]
-        self.train = data.train
-        self.weight = data.weights()[self.train]
-
-    def params(self, x: FloatArray) -> SensorParams:
-        values = {}
-        for name, xi in zip(self.names, x, strict=True):
-            if name in LINEAR_PARAMETERS:
-                values[name] = float(xi) * LINEAR_PARAMETERS[name]
-            else:
-                values[name] = getattr(self.prior, name) * math.exp(float(xi))
-        return replace(self.prior, **values)
-
-    def x0(self) -> FloatArray:
-        x = []
-        for name in self.names:
-            value = getattr(self.prior, name)
-            x.append(value / LINEAR_PARAMETERS[name] if name in LINEAR_PARAMETERS else 0.0)
-        return np.array(x, dtype=np.float64)
-
-    def bounds(self) -> tuple[FloatArray, FloatArray]:
-        lo, hi = [], []
-        for name in self.names:
-            if name == "temperature_coeff_per_k":
-                lo.append(-20.0)
-                hi.append(20.0)
-            elif name in LINEAR_PARAMETERS:
-                lo.append(0.0)
-                hi.append(max(100.0, 100.0 * getattr(self.prior, name) / LINEAR_PARAMETERS[name]))
-            else:
-                lo.append(-LOG_BOUND)
-                hi.append(LOG_BOUND)
-        return np.array(lo), np.array(hi)
-
-    def model_ohm(self, params: SensorParams) -> FloatArray:
-        """The model's resistance on every row, driven by the record's force history."""
-        model = SensorModel(self.effects, params)
-        out, _ = model.simulate(self.force, self.data.time_s, temperature_c=self.temp)
-        return np.asarray(out.total_ohm[:, 0])
-
-    def log_residual(self, params: SensorParams) -> FloatArray:
-        """ln R_measured - ln R_model on every row (NaN where either side is not finite)."""
-        r_model = self.model_ohm(params)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            res = np.log(self.data.resistance_ohm) - np.log(r_model)
-        return np.asarray(np.where(np.isfinite(res), res, np.nan))
-
-    def residual(self, x: FloatArray) -> FloatArray:
-        try:
-            res = self.log_residual(self.params(x))[self.train]
-        except ValueError:
-            return np.full(int(np.count_nonzero(self.train)), 1e3)
-        return np.asarray(np.nan_to_num(res, nan=10.0) * self.weight)
-
-
 def fit_channel(
     data: FitData,
     effects: Iterable[str],
@@ -278,49 +222,80 @@ def fit_channel(
     fit: Sequence[str] | None = None,
     fix: Sequence[str] = (),
     loss: str = "soft_l1",
+    objective: str = "log_r",
+    fit_force_offset: bool = False,
+    force_offset_n: float = 0.0,
 ) -> FitResult:
     """Fit the parameters of ``effects`` (or ``fit``) to one channel's record.
 
     Parameters the record cannot determine (``record_limitations``) or that come out with a
     95 % interval wider than a factor of 10 are fixed at their prior, with the reason kept.
+
+    ``objective``: ``"log_r"`` (log-resistance residuals weighted by the measurement model) or
+    ``"force"`` (the same residuals divided by |d ln R_model / dF|: force errors); see
+    ``objectives``. ``fit_force_offset`` fits a reference-force zero offset ``force_offset_n``
+    (starting at ``force_offset_n``, which is otherwise a fixed value): the model is driven by
+    F_ref + offset, the offset is reported among the estimates (signed 95 % interval) and in
+    the correlations, and the returned parameters' force range is the prior's shifted by it.
+    With an offset, the force gaps compare the inverted force with F_ref + offset, which is
+    the same as comparing F_inv - offset with F_ref (what the conductance line's intercept
+    does for the line).
     """
     chosen = parse_effects(effects)
+    objective = check_objective(objective)
     prior = prior or SensorParams()
     names = tuple(fit) if fit is not None else parameters_for(chosen)
+    if fit_force_offset and OFFSET not in names:
+        names = (*names, OFFSET)
+    elif not fit_force_offset:
+        names = tuple(n for n in names if n != OFFSET)
     reasons = {k: v for k, v in record_limitations(data, chosen, prior).items() if k in names}
     reasons.update({name: "fixed by request" for name in fix if name in names})
     free = tuple(n for n in names if n not in reasons)
-    params, x, jac, free = _solve(data, chosen, prior, free, loss)
-    # a parameter the data leave undetermined is fixed at its prior, and the rest refitted
-    for _ in range(3):
-        sigma = _sigma(jac, _Problem(data, chosen, params, free).residual(x), len(free))
-        loose = [n for n, s in zip(free, sigma, strict=True) if not (s < _LOOSE_SIGMA.get(n, 1.15))]
+    how = _How(objective, loss, f_scale(objective, data.force_n, data.usable))
+    params, offset, x, jac, cost = _solve(data, chosen, prior, force_offset_n, free, how)
+    # a parameter the data leave undetermined is fixed at its prior, and the rest refitted (until
+    # none is left; the default log-R fit keeps its three rounds, so that it is unchanged)
+    rounds = 3 if objective == "log_r" and not fit_force_offset else len(free)
+    for _ in range(rounds):
+        sigma = _sigma(jac, Problem(data, chosen, params, free, objective, offset).residual(x), len(free))
+        loose = [n for n, s in zip(free, sigma, strict=True) if not (s < _loose_sigma(n, data))]
         if not loose:
             break
         worst = loose[int(np.argmax([sigma[free.index(n)] for n in loose]))]
-        reasons[worst] = "not determined by this record (95 % interval wider than a factor of 10)"
+        wide = "its allowed range" if worst == OFFSET else "a factor of 10"
+        reasons[worst] = f"not determined by this record (95 % interval wider than {wide})"
         free = tuple(n for n in free if n != worst)
-        params = replace(params, **{worst: getattr(prior, worst)})
-        params, x, jac, free = _solve(data, chosen, params, free, loss)
-    problem = _Problem(data, chosen, params, free)
+        if worst == OFFSET:
+            offset = force_offset_n
+        else:
+            params = replace(params, **{worst: getattr(prior, worst)})
+        params, offset, x, jac, cost = _solve(data, chosen, params, offset, free, how)
+    problem = Problem(data, chosen, params, free, objective, offset)
     model_all = problem.model_ohm(params)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        residual_all = np.log(data.resistance_ohm) - np.log(model_all)
-    residual_all = np.where(np.isfinite(residual_all), residual_all, np.nan)
+    residual_all = problem.log_residual(params)
     sigma = _sigma(jac, problem.residual(problem.x0()), len(free))
     corr = _correlation(jac, len(free))
     estimates = []
     for name in names:
-        value = getattr(params, name)
+        value = offset if name == OFFSET else getattr(params, name)
         if name in free:
             s = float(sigma[free.index(name)])
-            if name in LINEAR_PARAMETERS:
+            note = ""
+            if name == OFFSET:
+                (lo_b, hi_b), half = offset_bounds(data.force_n, data.usable), Z95 * s * OFFSET_SCALE
+                low, high = max(value - half, lo_b), min(value + half, hi_b)
+                if value <= lo_b + 1e-3 * (hi_b - lo_b):
+                    low, note = lo_b, OFFSET_AT_BOUND
+            elif name in LINEAR_PARAMETERS:
                 low, high = _bounded_interval(name, value, s * LINEAR_PARAMETERS[name])
             else:
                 low, high = value * math.exp(-Z95 * s), value * math.exp(Z95 * s)
-            estimates.append(ParameterEstimate(name, value, low, high, True))
+            estimates.append(ParameterEstimate(name, value, low, high, True, note))
         else:
             estimates.append(ParameterEstimate(name, value, value, value, False, reasons.get(name, "")))
+    if offset != 0.0:
+        params = shift_force_range(params, offset)
     force_inv = invert_drift_corrected(data, chosen, params)
     return FitResult(
         effects=chosen,
@@ -328,8 +303,8 @@ def fit_channel(
         estimates=tuple(estimates),
         correlation_names=free,
         correlation=corr,
-        gap_train=_gap(residual_all, force_inv, data, data.train),
-        gap_test=_gap(residual_all, force_inv, data, data.test),
+        gap_train=_gap(residual_all, force_inv, data, data.train, offset),
+        gap_test=_gap(residual_all, force_inv, data, data.test, offset),
         n_train=int(np.count_nonzero(data.train)),
         n_test=int(np.count_nonzero(data.test)),
         n_parameters=len(free),
@@ -337,7 +312,17 @@ def fit_channel(
         log_residual=residual_all,
         model_ohm=model_all,
         force_inverted_n=force_inv,
+        objective=objective,
+        force_offset_n=offset,
+        cost=cost,
     )
+
+
+def shift_force_range(params: SensorParams, offset: float) -> SensorParams:
+    """The force range in offset-corrected terms: both ends + offset (the lower one kept > 0)."""
+    high = params.force_max_n + offset
+    low = min(max(params.force_min_n + offset, 1e-3), 0.999 * high)
+    return replace(params, force_min_n=low, force_max_n=high)
 
 
 def _bounded_interval(name: str, value: float, sigma: float) -> tuple[float, float]:
@@ -356,6 +341,21 @@ def _bounded_interval(name: str, value: float, sigma: float) -> tuple[float, flo
     return low, high
 
 
+OFFSET_AT_BOUND = (
+    "at its lower bound: the smallest loaded reference force is driven at about 0 N; the data would "
+    "move the zero further (a bound, one-sided interval)"
+)
+
+
+def _loose_sigma(name: str, data: FitData) -> float:
+    """The scaled sigma beyond which a parameter counts as not determined (the offset: a 95 %
+    interval wider than its allowed range)."""
+    if name == OFFSET:
+        low, high = offset_bounds(data.force_n, data.usable)
+        return (high - low) / (2 * Z95 * OFFSET_SCALE)
+    return _LOOSE_SIGMA.get(name, 1.15)
+
+
 # a log-parameter with sigma s has a 95 % interval of a factor exp(2 * 1.96 s); 1.15 is x10 wide
 _LOOSE_SIGMA: dict[str, float] = {
     "e0_slope_pa_per_n": 5.0,
@@ -366,31 +366,43 @@ _LOOSE_SIGMA: dict[str, float] = {
 }
 
 
+@dataclass(frozen=True)
+class _How:
+    objective: str
+    loss: str
+    f_scale: float
+
+
 def _solve(
-    data: FitData, effects: tuple[str, ...], prior: SensorParams, free: tuple[str, ...], loss: str
-) -> tuple[SensorParams, FloatArray, FloatArray, tuple[str, ...]]:
-    problem = _Problem(data, effects, prior, free)
+    data: FitData,
+    effects: tuple[str, ...],
+    prior: SensorParams,
+    offset: float,
+    free: tuple[str, ...],
+    how: _How,
+) -> tuple[SensorParams, float, FloatArray, FloatArray, float]:
+    problem = Problem(data, effects, prior, free, how.objective, offset)
     if not free or not problem.train.any():
-        return prior, np.zeros(0), np.zeros((0, 0)), free
+        return prior, offset, np.zeros(0), np.zeros((0, 0)), math.nan
     lo, hi = problem.bounds()
     x0 = np.clip(problem.x0(), lo, hi)
     result = least_squares(
         problem.residual,
         x0,
         bounds=(lo, hi),
-        loss=loss,
-        f_scale=0.05,
+        loss=how.loss,
+        f_scale=how.f_scale,
         x_scale="jac",
         max_nfev=400,
     )
-    params = problem.params(result.x)
+    params, offset = problem.params(result.x), problem.offset(result.x)
     # re-express x around the fitted parameters (x = 0 there) for the intervals
-    around = _Problem(data, effects, params, free)
+    around = Problem(data, effects, params, free, how.objective, offset)
     x = around.x0()
-    return params, x, _jacobian(around, x), free
+    return params, offset, x, _jacobian(around, x), float(result.cost)
 
 
-def _jacobian(problem: _Problem, x: FloatArray) -> FloatArray:
+def _jacobian(problem: Problem, x: FloatArray) -> FloatArray:
     """Central-difference Jacobian of the residuals (no robust-loss weighting)."""
     base = problem.residual(x)
     jac = np.empty((base.size, x.size))
@@ -432,10 +444,11 @@ def invert_drift_corrected(data: FitData, effects: Iterable[str], params: Sensor
     return np.asarray(np.where(inv.status[:, 0] == ForceStatus.INVALID, np.nan, f))
 
 
-def _gap(residual: FloatArray, force_inv: FloatArray, data: FitData, rows: BoolArray) -> Gap:
+def _gap(residual: FloatArray, force_inv: FloatArray, data: FitData, rows: BoolArray, offset: float) -> Gap:
+    """RMS gaps on ``rows``; the force one against the offset-corrected reference F_ref + offset."""
     r = residual[rows]
     r = r[np.isfinite(r)]
-    df = (force_inv - data.force_n)[rows]
+    df = (force_inv - (data.force_n + offset))[rows]
     df = df[np.isfinite(df)]
     return Gap(
         log_resistance_rms=float(np.sqrt(np.mean(r * r))) if r.size else math.nan,

@@ -30,6 +30,25 @@ from .common import parse_assignments
     "or auto (whichever reads held-out force best)",
 )
 @click.option(
+    "--objective",
+    type=click.Choice(("auto", "log-r", "force")),
+    default="auto",
+    show_default=True,
+    help="what the physical model's fit minimises: log-r (log-resistance residuals weighted by the "
+    "measurement model), force (the same residuals divided by d ln R / dF: force errors, started from "
+    "the log-r fit), or auto (both; keeps the one that reads held-out force better)",
+)
+@click.option(
+    "--force-offset",
+    "force_offset",
+    type=click.Choice(("auto", "fit", "none")),
+    default="auto",
+    show_default=True,
+    help="reference-force zero offset (the model is driven by F_ref + offset): fit it, leave it out, or "
+    "auto (fit it and keep it only if it lowers the held-out force RMS); held-out errors of a fit with an "
+    "offset are against F_ref + offset, and the force range written is the record's + offset",
+)
+@click.option(
     "--as",
     "as_name",
     default=None,
@@ -48,6 +67,8 @@ def calibrate_cmd(
     params: tuple[str, ...],
     out_path: Path | None,
     model: str,
+    objective: str,
+    force_offset: str,
     as_name: str | None,
     plot_dir: Path | None,
     as_json: bool,
@@ -86,7 +107,15 @@ def calibrate_cmd(
     for ch in channels:
         try:
             results.append(
-                calibrate(ch, chosen, prior, record_name=str(record_path), metadata=record.metadata)
+                calibrate(
+                    ch,
+                    chosen,
+                    prior,
+                    record_name=str(record_path),
+                    metadata=record.metadata,
+                    objective=objective.replace("-", "_"),
+                    force_offset=force_offset,
+                )
             )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from None
@@ -128,7 +157,7 @@ def ch_record(record: object, name: str) -> object:
 
 
 #: The top-level tables a calibration file has (``analysis.calibration.calibration_toml``).
-_CALIBRATION_TABLES = frozenset({"channel", "line", "lookup"})
+_CALIBRATION_TABLES = frozenset({"meta", "channel", "line", "lookup"})
 
 
 def _check_out(path: Path, overwrite: bool) -> None:
