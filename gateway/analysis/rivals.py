@@ -112,6 +112,26 @@ class Rivals:
         return float(np.sqrt(np.mean(e * e))) if e.size else math.nan
 
 
+#: A line with n < 0 starts this factor above its zero-conductance force -n/m.
+LINE_ZERO_MARGIN = 1.1
+
+
+def line_range_lines(line: ConductanceLine, record_min_n: float) -> list[str]:
+    """The ``[line]`` table's own ``force_min_n`` when the channel's (the record's lowest
+    force) lies at or below 1.1 x the line's zero-conductance force -n/m (n < 0): below -n/m
+    a sensor at rest would read a force (``gateway.model.conversion.LineConversion``)."""
+    if line.intercept_s >= 0.0:
+        return []
+    floor_n = LINE_ZERO_MARGIN * (-line.intercept_s / line.slope_s_per_n)
+    if record_min_n > floor_n:
+        return []
+    return [
+        f"# the line reaches zero conductance at {floor_n / LINE_ZERO_MARGIN:.4g} N: it reads from "
+        f"{floor_n:.4g} N (no contact below), not from the record's {record_min_n:.4g} N",
+        f"force_min_n = {floor_n!r}",
+    ]
+
+
 def verdict(model_rms: float, line_rms: float, tie: float = 0.02) -> str:
     """Plain words: does the model beat, tie or lose to the line on held-out force."""
     if not (math.isfinite(model_rms) and math.isfinite(line_rms)):

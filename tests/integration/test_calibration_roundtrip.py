@@ -105,6 +105,13 @@ async def _read_with_calibration(
     return data[:, 0], data[:, 1], data[:, 2], data[:, 3].astype(int)
 
 
+def _assert_every_hold_read(reference_n: np.ndarray) -> None:
+    """At least 20 samples at each of the ``holds`` scenario's levels."""
+    for level in (0.5, 2.0, 5.0):
+        n = int(np.count_nonzero(np.isclose(reference_n, level)))
+        assert n >= 20, f"only {n} settled samples at {level} N"
+
+
 def test_calibrated_gateway_reads_within_a_tenth_of_a_newton(tmp_path: Path) -> None:
     record = asyncio.run(_record_bench(tmp_path))
     cal = tmp_path / "cal.toml"
@@ -122,7 +129,9 @@ def test_calibrated_gateway_reads_within_a_tenth_of_a_newton(tmp_path: Path) -> 
         f"\ncalibrated gateway: {100 * within:.1f} % of {settled.sum()} settled samples within 0.1 N "
         f"(mean error {err.mean():.3f} N, max {err.max():.3f} N)"
     )
-    assert settled.sum() > 200
+    # every hold of the read-back (0.5, 2 and 5 N) is read, whatever the machine's load (a count
+    # of samples over all was a timing assumption: a busy machine polls less often)
+    _assert_every_hold_read(reference[settled])
     assert within >= 0.95
 
     # the same sensor read with the default parameters is measurably worse
@@ -155,5 +164,5 @@ def test_a_line_calibration_is_read_by_the_gateway(tmp_path: Path) -> None:
     loaded = (since_step >= 2.0) & (reference > 0) & (status == int(ChannelStatus.OK))
     err = np.abs(force[loaded] - reference[loaded])
     print(f"\nline calibration: mean error {err.mean():.3f} N over {loaded.sum()} settled samples")
-    assert loaded.sum() > 200
+    _assert_every_hold_read(reference[loaded])
     assert err.mean() < 0.5  # the line has no creep correction: coarser than the model, but a reading

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from gateway.analysis.calibration import calibrate
@@ -118,3 +119,32 @@ def test_a_record_too_short_to_hold_out_is_refused() -> None:
         assert "not enough usable rows" in str(exc)
     else:
         raise AssertionError("a one-row record was calibrated")
+
+
+def test_a_line_with_a_negative_intercept_is_written_to_read_from_above_its_zero() -> None:
+    """C = m F + n with n = -1e-5 S, m = 2e-5 S/N reaches zero conductance at 0.5 N; a record
+    that starts at 0.3 N would give a channel reading ~0.5 N at rest, which the gateway refuses
+    (``LineConversion``). The [line] table then carries force_min_n = 1.1 x 0.5 N, and loads."""
+    import math
+    import tomllib
+
+    from gateway.analysis.rivals import line_range_lines
+    from gateway.model import ConductanceLine
+    from gateway.model.conversion import ConversionSet, conversion_from_table
+
+    line = ConductanceLine(2e-5, -1e-5)
+    extra = line_range_lines(line, 0.3)
+    table = tomllib.loads(
+        f"slope_s_per_n = {line.slope_s_per_n!r}\nintercept_s = {line.intercept_s!r}\n" + "\n".join(extra)
+    )
+    assert table["force_min_n"] == pytest.approx(0.55)
+    conv = conversion_from_table("line", table, 0.3, 8.0)  # the channel's range is the record's
+    force, status = np.zeros(1), np.zeros(1, dtype=np.int8)
+    ConversionSet([conv]).apply(np.array([math.inf]), force, status)
+    assert force[0] == 0.0 and status[0] == ForceStatus.NO_CONTACT
+    # without the table's own minimum the same line is refused, with the reason
+    with pytest.raises(ValueError, match=r"zero conductance at 0\.5 N"):
+        conversion_from_table("line", {"slope_s_per_n": 2e-5, "intercept_s": -1e-5}, 0.3, 8.0)
+    # a positive intercept, or a record that starts well above the zero, adds nothing
+    assert line_range_lines(ConductanceLine(2e-5, 1e-6), 0.05) == []
+    assert line_range_lines(line, 0.6) == []
