@@ -193,3 +193,22 @@ def test_a_header_with_a_newline_inside_a_quoted_name_is_named_on_one_line() -> 
     message = str(caught.value)
     assert "\n" not in message and "missing required column 'resistance_ohm'" in message
     assert "0.0\\n0.1" in message
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
+def test_unix_windows_and_old_mac_line_endings_read_the_same(newline: str) -> None:
+    """The reader walks the text line by line (no list of every line); each ending reads alike,
+    and a quoted field that spans lines stays one field."""
+    lines = [
+        "# source: bench",
+        "time_s,channel,resistance_ohm,force_n,note",
+        "0,a,100,1,x",
+        '0.5,a,inf,0,"two',
+        'lines"',
+    ]
+    record = parse_record(newline.join(lines) + newline)
+    ch = record.channel("a")
+    assert record.metadata == {"source": "bench"} and record.extra_columns == ("note",)
+    assert ch.time_s.tolist() == [0.0, 0.5] and ch.resistance_ohm.tolist() == [100.0, math.inf]
+    assert ch.force_n is not None and ch.force_n.tolist() == [1.0, 0.0]
+    assert ch.line.tolist() == [3, 4]
