@@ -7,8 +7,10 @@ Starting from a baseline model (by default ``tunneling``, the model the paper im
    last load change, loading against unloading, by temperature and by load cycle;
 3. refit with each candidate effect added and score it on held-out segments of the record,
    with a penalty for the parameters it adds;
-4. add the best candidate only if it wins clearly (and say so when two candidates cannot be
-   told apart, with the measurement that would separate them); repeat until none helps.
+4. add the best candidate only if it wins clearly on held-out log-R, or failing that, one that
+   clearly lowers the held-out force and answers a disagreement of step 2 on its own axis
+   (``discrepancy_choice``); say so when two candidates cannot be told apart, with the
+   measurement that would separate them; repeat until none helps.
 
 The JSON summary keeps the keys and meanings of ``docs/record-format.md``.
 """
@@ -24,7 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..model import EFFECT_NAMES, SensorParams, parse_effects
-from .diagnostics import OPEN_CIRCUIT_OHM, Finding, describe_gaps
+from .diagnostics import Finding, describe_gaps
+from .discrepancy_choice import CandidateScore, known_state_force_rms
+from .discrepancy_choice import decide as _decide
+from .discrepancy_choice import penalized as _penalized
 from .fitting import FitData, FitResult, Gap, fit_channel, parameters_for
 from .measurement import noise_model, time_is_real
 from .records import ChannelRecord
@@ -32,59 +37,8 @@ from .rivals import Rivals
 
 FloatArray = NDArray[np.float64]
 
-#: A candidate must lower the held-out log-resistance RMS by at least this fraction ...
-MIN_RELATIVE_GAIN = 0.015
-#: ... and its penalized held-out score by at least this much (like a BIC difference).
-MIN_SCORE_GAIN = 30.0
-#: Added to the unloaded rows' mean squared log residual: 1 % in resistance, squared.
-UNLOADED_MSE_FLOOR = 1e-4
-#: The runner-up is "indistinguishable" when it achieves this share of the best gain.
-AMBIGUOUS_SHARE = 0.85
-#: A candidate that raises the held-out force RMS by more than this share, plus a quarter of the
-#: force noise floor (smaller changes cannot be told from noise), is not added.
-FORCE_TOLERANCE = 0.02
-FORCE_FLOOR_SHARE = 0.25
 TIME_EFFECTS = ("creep", "creep2")
 MAX_FIT_ROWS = 6000
-
-_SEPARATING_MEASUREMENT: dict[frozenset[str], str] = {
-    frozenset({"creep", "creep2"}): "a long hold (20 min or more) at constant load: a second, slower element "
-    "keeps drifting after the first has settled",
-    frozenset({"creep", "hysteresis"}): "an unload-and-hold and ramps at two rates: creep depends on time, "
-    "hysteresis only on the load direction",
-    frozenset({"creep2", "hysteresis"}): "an unload-and-hold and ramps at two rates: creep depends on time, "
-    "hysteresis only on the load direction",
-    frozenset({"contact", "series_resistance"}): "loads spanning 0.2-8 N: contact falls as 1/sqrt(F), a "
-    "series resistance stays constant",
-    frozenset(
-        {"contact", "leakage"}
-    ): "the unloaded resistance and loads below 0.5 N, where leakage caps the reading",
-    frozenset({"series_resistance", "leakage"}): "loads at both ends of the range: a series resistance shows "
-    "at high force, leakage at low force",
-    frozenset({"temperature", "creep"}): "a temperature step at constant load",
-    frozenset({"temperature", "creep2"}): "a temperature step at constant load",
-    frozenset({"temperature", "hysteresis"}): "a temperature step at constant load",
-}
-_DEFAULT_MEASUREMENT = (
-    "a record with log-spaced loads from 0.2 to 8 N, long holds, an unload-and-hold, ramps at two rates, "
-    "several cycles and a temperature step at constant load"
-)
-
-
-def separating_measurement(a: str, b: str) -> str:
-    """The measurement that would tell effects ``a`` and ``b`` apart, in words."""
-    return _SEPARATING_MEASUREMENT.get(frozenset({a, b}), _DEFAULT_MEASUREMENT)
-
-
-@dataclass(frozen=True)
-class CandidateScore:
-    """A candidate effect refitted and scored on held-out rows."""
-
-    effect: str
-    added_parameters: int
-    gap_test: Gap
-    score: float  # penalized: n ln(mse_held_out) + k ln(n); lower is better
-    fit: FitResult
 
 
 @dataclass(frozen=True)
@@ -366,134 +320,5 @@ def _score(
     effects = parse_effects((*current, effect))
     fit = fit_channel(data, effects, prior)
     added = len(parameters_for(effects)) - len(parameters_for(current))
-    return CandidateScore(effect, added, fit.gap_test, _penalized(fit, data), fit)
-
-
-def _penalized(fit: FitResult, data: FitData) -> float:
-    """Held-out score, lower is better: the Gaussian log-likelihood of two groups of rows,
-    each with its own variance, plus a BIC penalty:
-    ``n_l ln(mse_l) + n_u ln(mse_u + UNLOADED_MSE_FLOOR) + k ln(n_train)``.
-
-    The loaded rows (``l``) carry the physics. The unloaded rows (``u``) are compared with
-    both readings capped at the open-circuit level: a model that reads finite where the
-    sensor is open (or the reverse) raises ``mse_u``, which is what tells an open contact at
-    rest from a constant series resistance, and a leakage path from an open contact. The two
-    groups have separate variances because one inconsistent unloaded row (a reading taken
-    while the load changed, ln(1e8 / 3e4)^2 = 65) would otherwise swamp the loaded rows'
-    squared residuals of about 1e-4 and hide every improvement of the physics.
-    """
-    score = fit.n_parameters * math.log(max(fit.n_train, 2))
-    loaded = data.held_out & data.usable & (data.force_n > 0.0)
-    unloaded = data.held_out & (data.force_n <= 0.0)
-    weights = data.weights()
-    for rows, floor in ((loaded, 0.0), (unloaded, UNLOADED_MSE_FLOOR)):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            measured = np.log(np.minimum(data.resistance_ohm[rows], OPEN_CIRCUIT_OHM))
-            model = np.log(np.minimum(fit.model_ohm[rows], OPEN_CIRCUIT_OHM))
-        res = measured - model
-        if floor == 0.0:
-            res = res * weights[rows]
-        res = res[np.isfinite(res)]
-        if res.size == 0:
-            continue
-        mse = float(np.mean(res * res)) + floor
-        if mse <= 0:
-            return -math.inf
-        score += res.size * math.log(mse)
-    return score
-
-
-def _decide(
-    fit: FitResult,
-    data: FitData,
-    scored: Sequence[CandidateScore],
-    findings: Sequence[Finding],
-    force_floor: float = 0.0,
-) -> tuple[str | None, str, str | None]:
-    """The candidate to add (or None), the evidence in words, and the runner-up when they tie.
-
-    A candidate must win on held-out log-R (score and relative gain) and must not make the
-    held-out force worse. When the runner-up gains nearly as much, the better one is still
-    added and the runner-up named; the separating measurement is named only when the record
-    lacks it.
-    """
-    if not scored:
-        return None, "no candidates to try", None
-    now = _penalized(fit, data)
-    now_rms = fit.gap_test.log_resistance_rms
-    now_force = fit.gap_test.force_rms_n
-    table = "; ".join(
-        f"{c.effect} {c.gap_test.log_resistance_rms:.4f} / {c.gap_test.force_rms_n:.4g} N" for c in scored
-    )
-    worse_force = [c.effect for c in scored if _worse_force(c.gap_test.force_rms_n, now_force, force_floor)]
-    eligible = [c for c in scored if c.effect not in worse_force]
-    skipped = (
-        f"; not added because they make the held-out force worse: {', '.join(worse_force)}"
-        if worse_force
-        else ""
-    )
-    if not eligible:
-        return (
-            None,
-            f"no candidate helps the force: now {now_rms:.4f} / {now_force:.4g} N; {table}{skipped}",
-            None,
-        )
-    best = eligible[0]
-    gain = now - best.score
-    rel = 1.0 - best.gap_test.log_resistance_rms / now_rms if now_rms > 0 else 0.0
-    if gain < MIN_SCORE_GAIN or rel < MIN_RELATIVE_GAIN:
-        return (
-            None,
-            f"no candidate helps clearly: held-out log-resistance RMS / force RMS {now_rms:.4f} / "
-            f"{now_force:.4g} N now; with each candidate: {table}{skipped}",
-            None,
-        )
-    runner_up = None
-    tie = ""
-    if len(eligible) > 1:
-        second = eligible[1]
-        gain2 = now - second.score
-        rel2 = 1.0 - second.gap_test.log_resistance_rms / now_rms
-        if gain2 >= AMBIGUOUS_SHARE * gain and rel2 >= AMBIGUOUS_SHARE * rel:
-            runner_up = second.effect
-            tie = (
-                f"; {second.effect} fits nearly as well (held-out log-R RMS "
-                f"{second.gap_test.log_resistance_rms:.4f} against {best.gap_test.log_resistance_rms:.4f}), "
-                f"{best.effect} is added as the better one"
-            )
-            missing = _missing_measurement(data, best.effect, second.effect)
-            if missing:
-                tie += f"; to separate them, record {missing}"
-    where = f" ({findings[0].sentence})" if findings else ""
-    evidence = (
-        f"held-out log-resistance RMS {now_rms:.4f} -> {best.gap_test.log_resistance_rms:.4f} and force RMS "
-        f"{now_force:.4g} -> {best.gap_test.force_rms_n:.4g} N with {best.effect} (+{best.added_parameters} "
-        f"parameters, score {now:.1f} -> {best.score:.1f}){where}{tie}; all candidates: {table}{skipped}"
-    )
-    return best.effect, evidence, runner_up
-
-
-def _worse_force(candidate: float, now: float, force_floor: float = 0.0) -> bool:
-    if not (math.isfinite(candidate) and math.isfinite(now)):
-        return False
-    return candidate > now * (1.0 + FORCE_TOLERANCE) + max(1e-3, FORCE_FLOOR_SHARE * force_floor)
-
-
-def _missing_measurement(data: FitData, a: str, b: str) -> str:
-    """The separating measurement, or "" when the record already has it (force span for the
-    force-range pairs)."""
-    pair = frozenset({a, b})
-    loaded = data.force_n[data.usable & (data.force_n > 0)]
-    spans = (
-        loaded.size and float(np.percentile(loaded, 2)) <= 0.25 and float(np.percentile(loaded, 98)) >= 7.0
-    )
-    if spans and pair in _FORCE_RANGE_PAIRS:
-        return ""
-    return separating_measurement(a, b)
-
-
-_FORCE_RANGE_PAIRS = {
-    frozenset({"contact", "series_resistance"}),
-    frozenset({"contact", "leakage"}),
-    frozenset({"series_resistance", "leakage"}),
-}
+    known = known_state_force_rms(data, fit)
+    return CandidateScore(effect, added, fit.gap_test, _penalized(fit, data), fit, known)

@@ -6,7 +6,9 @@ from dataclasses import replace
 
 from test_discrepancy import NOISE, world_channel  # same directory (rootdir-relative import mode)
 
+from gateway.analysis.diagnostics import Finding
 from gateway.analysis.discrepancy import CandidateScore, _decide, _penalized
+from gateway.analysis.discrepancy_choice import known_state_force_rms
 from gateway.analysis.fitting import FitData, fit_channel
 
 
@@ -40,7 +42,46 @@ def test_a_candidate_that_makes_the_force_worse_is_not_added() -> None:
     base = fit_channel(data, ("tunneling", "creep"))
     contact = fit_channel(data, ("tunneling", "contact", "creep"))
     worse = replace(contact.gap_test, force_rms_n=base.gap_test.force_rms_n * 1.5)
-    scored = [CandidateScore("contact", 1, worse, _penalized(contact, data), contact)]
+    # worse with the tracked state and with the state the reference force drives
+    known_worse = known_state_force_rms(data, base) * 1.5
+    scored = [CandidateScore("contact", 1, worse, _penalized(contact, data), contact, known_worse)]
     added, evidence, _ = _decide(base, data, scored, ())
     assert added is None
     assert "make the held-out force worse: contact" in evidence
+
+
+def test_a_candidate_worse_only_with_the_tracked_state_is_added_and_the_evidence_says_so() -> None:
+    """Near an ADC rail the tracked state (hysteresis direction) moves on read-out noise: the
+    tracked force gets worse although, with the state the reference force drives, it improves."""
+    data = FitData.from_channel(world_channel((), 2))
+    base = fit_channel(data, ("tunneling", "creep"))
+    contact = fit_channel(data, ("tunneling", "contact", "creep"))
+    worse = replace(contact.gap_test, force_rms_n=base.gap_test.force_rms_n * 1.5)
+    known = known_state_force_rms(data, contact)
+    assert known < known_state_force_rms(data, base)
+    scored = [CandidateScore("contact", 1, worse, _penalized(contact, data), contact, known)]
+    added, evidence, _ = _decide(base, data, scored, ())
+    assert added == "contact", evidence
+    assert "with the state tracked from its own readings the held-out force gets worse" in evidence
+
+
+def test_the_force_route_needs_a_finding_on_the_effects_axis() -> None:
+    """A candidate that does not win clearly on log-R is added on a clear force gain only when
+    the diagnostics found a disagreement on its own axis (hysteresis: the load direction)."""
+    data = FitData.from_channel(world_channel(("hysteresis",), 1))
+    base = fit_channel(data, ("tunneling", "contact", "creep"))
+    with_h = fit_channel(data, ("tunneling", "contact", "creep", "hysteresis"))
+    now = _penalized(base, data)
+    # a log-R gain too small for route 1, a clear force gain
+    weak = CandidateScore("hysteresis", 2, with_h.gap_test, now - 5.0, with_h)
+    assert with_h.gap_test.force_rms_n < 0.97 * base.gap_test.force_rms_n
+    direction = Finding(
+        "direction", "unloading", -0.03, 500, "while unloading the measured resistance is 3 % below"
+    )
+    temperature = Finding(
+        "temperature", "above 27 °C", -0.02, 500, "above 27 °C the measured resistance is 2 % below"
+    )
+    added, evidence, _ = _decide(base, data, [weak], (direction,))
+    assert added == "hysteresis" and "added on the force" in evidence, evidence
+    added, evidence, _ = _decide(base, data, [weak], (temperature,))
+    assert added is None, evidence
