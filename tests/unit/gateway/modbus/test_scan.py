@@ -180,6 +180,22 @@ def test_a_ramping_channel_inside_the_frame_is_no_clock() -> None:
     assert result.best_frame is not None and result.best_frame.count == CHANNELS
 
 
+@pytest.mark.parametrize("edge", [FRAME_ADDRESS, FRAME_ADDRESS + CHANNELS - 1])
+def test_a_frame_edge_channel_whose_noise_rises_every_round_is_no_clock(edge: int) -> None:
+    """Seen under load on the simulator's rawgrid map: in 5 rounds the first channel's noise
+    rose at every round (+1 or +2 counts), steady enough for a slow counter; nothing is left
+    of it (6-31 unreadable), so only the rest of the frame can tell it is a channel."""
+
+    def rising(t: float, regs: dict[int, int | None]) -> None:
+        k = round((t - 100.0) / 0.1)
+        regs[edge] = 2995 + 2 * k
+
+    result = analyse(board(rounds=5, interval_s=0.1, load=False, extra=rising))
+    assert [c.address for c in result.clocks] == [10]
+    best = result.best_frame
+    assert best is not None and (best.address, best.count) == (FRAME_ADDRESS, CHANNELS)
+
+
 @pytest.mark.parametrize("rounds", [3, 5, 20])
 def test_a_frame_of_steadily_rising_channels_is_no_row_of_clocks(rounds: int) -> None:
     """A probe pressing in: every channel rises steadily, so any two neighbours read as a
