@@ -290,7 +290,8 @@ def fit_channel(
             elif name in LINEAR_PARAMETERS:
                 low, high = _bounded_interval(name, value, s * LINEAR_PARAMETERS[name])
             else:
-                low, high = value * math.exp(-Z95 * s), value * math.exp(Z95 * s)
+                half_log = min(Z95 * s, 700.0)  # beyond: undetermined, (0, inf) in effect
+                low, high = value * math.exp(-half_log), value * math.exp(half_log)
             estimates.append(ParameterEstimate(name, value, low, high, True, note))
         else:
             estimates.append(ParameterEstimate(name, value, value, value, False, reasons.get(name, "")))
@@ -326,15 +327,11 @@ def shift_force_range(params: SensorParams, offset: float) -> SensorParams:
 
 
 def _bounded_interval(name: str, value: float, sigma: float) -> tuple[float, float]:
-    """A 95 % interval inside the parameter's allowed range: a non-negative parameter's
-    interval is taken in log space (delta method on ln p, so it never crosses 0); a signed one
-    is the Wald interval clipped to its range."""
+    """A 95 % interval inside the parameter's allowed range: the Wald interval clipped to it
+    (a slope in [0, inf) reads [0, high], never below 0). The log-space interval (delta method
+    on ln p) was tried: for a slope estimated at 1-2.5 standard errors it excluded true values
+    near 0 (18 of 24 covered on simulated records, against 23 of 24 clipped)."""
     allowed = PARAMETER_RANGES.get(name)
-    if allowed is not None and allowed.low == 0.0 and value > 0.0:
-        rel = sigma / value
-        if not math.isfinite(rel) or Z95 * rel > 700.0:
-            return 0.0, math.inf
-        return value * math.exp(-Z95 * rel), value * math.exp(Z95 * rel)
     low, high = value - Z95 * sigma, value + Z95 * sigma
     if allowed is not None:
         low, high = max(low, allowed.low), min(high, allowed.high)
@@ -403,15 +400,22 @@ def _solve(
 
 
 def _jacobian(problem: Problem, x: FloatArray) -> FloatArray:
-    """Central-difference Jacobian of the residuals (no robust-loss weighting)."""
+    """Finite-difference Jacobian of the residuals (no robust-loss weighting): central, or
+    one-sided at a bound (a slope fitted at 0 would otherwise be evaluated below 0, where the
+    parameters are invalid and the residual a constant, and the other intervals collapse)."""
     base = problem.residual(x)
+    lo, hi = problem.bounds()
     jac = np.empty((base.size, x.size))
     for i in range(x.size):
         h = 1e-4 * max(1.0, abs(float(x[i])))
         up, down = x.copy(), x.copy()
-        up[i] += h
-        down[i] -= h
-        jac[:, i] = (problem.residual(up) - problem.residual(down)) / (2 * h)
+        if x[i] + h <= hi[i]:
+            up[i] += h
+        if x[i] - h >= lo[i] or up[i] == x[i]:
+            down[i] -= h
+        r_up = base if up[i] == x[i] else problem.residual(up)
+        r_down = base if down[i] == x[i] else problem.residual(down)
+        jac[:, i] = (r_up - r_down) / float(up[i] - down[i])
     return jac
 
 

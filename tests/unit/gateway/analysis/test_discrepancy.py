@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from drawn_sensor import drawn_sensor
 
 from gateway.analysis.discrepancy import DiscrepancyReport, run_discrepancy
 from gateway.analysis.records import ChannelRecord, read_record
@@ -48,16 +49,7 @@ def world_channel(hidden: tuple[str, ...], seed: int, record_period_s: float = 2
     world's hidden effect, 1 % sensor resistance noise, 2 LSB ADC noise) and writes the
     spec's record format; the workflow reads it back with the strict reader.
     """
-    rng = np.random.default_rng(seed)
-    params = SimSensorParams(
-        r0_ohm=200e3 * rng.uniform(0.85, 1.15),
-        e0_pa=15e6 * rng.uniform(0.9, 1.1),
-        e1_pa=150e6 * rng.uniform(0.9, 1.1),
-        mu1_pa_s=1.5e10 * rng.uniform(0.9, 1.1),
-        rho2_ohm_m=rng.uniform(0.9, 1.1),
-        series_resistance_ohm=5000.0,
-        leakage_resistance_ohm=1e6,
-    )
+    params = drawn_sensor(seed, series_resistance_ohm=5000.0, leakage_resistance_ohm=1e6)
     config = ArrayConfig(
         channels=1,
         columns=1,
@@ -92,16 +84,7 @@ def adc_limited_record(hidden: tuple[str, ...], seed: int) -> tuple[ChannelRecor
     """``world_channel``'s sensor and protocol read through ``ADC_LIMITED``, with the front end
     stated in the record's metadata (``front_end``, ``adc_bits``, ``reference_ohm``,
     ``noise_lsb_rms``: what ``gateway.analysis.measurement`` reads)."""
-    rng = np.random.default_rng(seed)
-    params = SimSensorParams(
-        r0_ohm=200e3 * rng.uniform(0.85, 1.15),
-        e0_pa=15e6 * rng.uniform(0.9, 1.1),
-        e1_pa=150e6 * rng.uniform(0.9, 1.1),
-        mu1_pa_s=1.5e10 * rng.uniform(0.9, 1.1),
-        rho2_ohm_m=rng.uniform(0.9, 1.1),
-        series_resistance_ohm=5000.0,
-        leakage_resistance_ohm=1e6,
-    )
+    params = drawn_sensor(seed, series_resistance_ohm=5000.0, leakage_resistance_ohm=1e6)
     config = ArrayConfig(
         channels=1, columns=1, seed=seed, scenario="discrepancy", world_effects=hidden,
         param_spread=False, channel_params=params, **ADC_LIMITED,
