@@ -142,7 +142,11 @@ def test_calibrate_model_line_file_reads_through_the_processor(tmp_path: Path) -
     line = dev.channel("tip").conversion
     assert isinstance(line, LineConversion)
     assert (line.slope_s_per_n, line.intercept_s) == (m, n)
-    assert line.force_min_n == dev.channel("tip").params.force_min_n  # the range calibrate wrote
+    # this record's line has n < 0: it starts at 1.1 x its zero-conductance force -n/m, above the
+    # record's lowest force (the channel's force_min_n), so a sensor at rest reads no contact
+    assert n < 0
+    assert line.force_min_n == pytest.approx(1.1 * -n / m, rel=1e-12)
+    assert line.force_min_n > dev.channel("tip").params.force_min_n
     assert dev.channel("ch01").conversion is None
 
     proc = DeviceProcessor(dev, "bench", 0.1)
