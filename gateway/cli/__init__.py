@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from . import _threads  # noqa: F401  (before numpy loads: see the module)
 from .calibrate_cmd import calibrate_cmd
 from .config_cmd import channels, check_config
 from .discrepancy_cmd import discrepancy_cmd
