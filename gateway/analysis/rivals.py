@@ -122,7 +122,7 @@ def line_range_lines(line: ConductanceLine, record_min_n: float) -> list[str]:
     a sensor at rest would read a force (``gateway.model.conversion.LineConversion``)."""
     if line.intercept_s >= 0.0:
         return []
-    floor_n = LINE_ZERO_MARGIN * (-line.intercept_s / line.slope_s_per_n)
+    floor_n = LINE_ZERO_MARGIN * float(line.force(math.inf))  # an open sensor reads -n/m
     if record_min_n > floor_n:
         return []
     return [
