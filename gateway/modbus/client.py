@@ -11,6 +11,9 @@ pymodbus' outcomes tell:
 * the wrong function in the answer -> ``DecodeError``;
 * a connection that cannot be made or is lost -> ``DeviceConnectionError``.
 
+An RTU serial port that has just been opened is emptied first: what waits there is a late
+answer to a request of an earlier connection (RTU frames carry no transaction id).
+
 pymodbus' own retries and automatic reconnection are switched off: the poller retries and
 reconnects with its own bounded, jittered back-off.
 """
@@ -213,6 +216,7 @@ class ModbusTransport(Transport):
             raise DeviceConnectionError(f"bus {self.name!r}: cannot connect to {self.target}: {reason}")
         if self.bus.kind == "rtu":
             self._write_requests_at_once(client)
+            self._discard_waiting_input(client)
 
     @staticmethod
     def _write_requests_at_once(client: Any) -> None:
@@ -231,6 +235,26 @@ class ModbusTransport(Transport):
             write_ready()
 
         transport.write = write_at_once
+
+    @staticmethod
+    def _discard_waiting_input(client: Any) -> None:
+        """Drop what is waiting on a serial port just opened. RTU frames carry no transaction
+        id: the late answer to a request of an earlier connection on this line (given up when
+        that connection was closed, e.g. a cancelled poll) would be taken for the answer to
+        the next request to the same device. pyserial empties the port's input when it opens
+        it, but bytes can still arrive while pymodbus finishes its set-up: empty pyserial's
+        input buffer and pymodbus' receive buffer once more now. Skipped where the transport
+        (pymodbus 3.16's serial transport) is not the one expected."""
+        ctx: Any = getattr(client, "ctx", None)
+        port: Any = getattr(getattr(ctx, "transport", None), "sync_serial", None)
+        reset_input = getattr(port, "reset_input_buffer", None)
+        if callable(reset_input):
+            try:
+                reset_input()
+            except (OSError, ValueError) as exc:  # pyserial's SerialException is an OSError
+                log.debug("could not discard the input waiting on %s: %s", getattr(port, "port", "?"), exc)
+        if isinstance(getattr(ctx, "recv_buffer", None), bytes):
+            ctx.recv_buffer = b""
 
     async def _close(self) -> None:
         client, self._client = self._client, None
@@ -333,6 +357,9 @@ class ModbusTransport(Transport):
             response = await self._execute(
                 what, client.read_device_information(read_code=0x02, object_id=object_id, device_id=device_id)
             )
+            function_code = getattr(response, "function_code", None)
+            if function_code != FC_DEVICE_ID:
+                raise DecodeError(f"{what}: answer has function {function_code}")
             objects = getattr(response, "information", None)
             if not isinstance(objects, dict):
                 raise DecodeError(f"{what}: answer carries no objects")

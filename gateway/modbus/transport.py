@@ -12,6 +12,10 @@ back, and turning every failure into the gateway's typed errors (``gateway.error
 * a write the device configuration does not allow -> ``WriteNotAllowedError``, before
   anything is sent.
 
+On serial framing (RTU: no transaction id, so a late answer to an earlier request can look
+like the answer), a device identification whose answer cannot be used is asked once more
+after a short quiet time (``read_device_identification``).
+
 A backend implements the primitives ``_connect``, ``_close``, ``_read``, ``_write`` and
 ``_read_device_identification`` and the properties ``target`` and ``connected``; it may raise
 the typed errors itself where it knows better (a garbled frame, an exception code). The
@@ -198,29 +202,54 @@ class Transport(abc.ABC):
         await self._call(what, self._write(device_id, address, regs, what))
 
     async def read_device_identification(self, device_id: int) -> dict[str, str]:
-        """Function 43/14 (regular objects): e.g. VendorName, ProductCode, ModelName."""
+        """Function 43/14 (regular objects): e.g. VendorName, ProductCode, ModelName.
+
+        On serial framing (``is_serial_framing``) an answer that cannot be the one asked for
+        (``DecodeError``: another function, a garbled frame) is most likely the late answer to
+        an earlier request, which carries no transaction id to tell it apart: the line is
+        left quiet for ``late_answer_drain_s`` so that the real answer, if it is still coming,
+        arrives and is dropped, and the request is sent once more. A second failure raises.
+        """
         self._check_device_id(device_id)
         what = f"read device identification of device {device_id} on {self.name!r}"
-        result = await self._call(what, self._read_device_identification(device_id, what))
+        async with self._lock:
+            try:
+                result = await self._request(what, self._read_device_identification(device_id, what))
+            except DecodeError as exc:
+                if not self.is_serial_framing:
+                    raise
+                log.info("%s; asking once more", exc)
+                await asyncio.sleep(self.late_answer_drain_s)
+                result = await self._request(what, self._read_device_identification(device_id, what))
         assert isinstance(result, dict)
         return result
 
+    @property
+    def late_answer_drain_s(self) -> float:
+        """How long the line is left quiet before a request is repeated on serial framing (s):
+        enough for a late answer to arrive and be dropped (as the poller waits before a retry)."""
+        return min(0.5 * self.timeout_s, 0.2)
+
     async def _call(self, what: str, request: object) -> object:
         """Run one backend request (a coroutine) under the lock, the timeout and the mapping."""
-        assert asyncio.iscoroutine(request)
         async with self._lock:
-            try:
-                self._check_connected()
-                if self.bounds_own_wait:
-                    return await request
-                async with asyncio.timeout(self.timeout_s):
-                    return await request
-            except GatewayError:
-                raise
-            except Exception as exc:
-                raise self._map_error(what, exc) from exc
-            finally:
-                request.close()  # never started (not connected): no "never awaited" warning
+            return await self._request(what, request)
+
+    async def _request(self, what: str, request: object) -> object:
+        """``_call`` for a caller that holds the lock already."""
+        assert asyncio.iscoroutine(request)
+        try:
+            self._check_connected()
+            if self.bounds_own_wait:
+                return await request
+            async with asyncio.timeout(self.timeout_s):
+                return await request
+        except GatewayError:
+            raise
+        except Exception as exc:
+            raise self._map_error(what, exc) from exc
+        finally:
+            request.close()  # never started (not connected): no "never awaited" warning
 
     # ------------------------------------------------------------------ helpers
     def _check_connected(self) -> None:
