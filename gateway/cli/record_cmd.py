@@ -9,7 +9,9 @@ import logging
 import signal
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -18,7 +20,7 @@ from ..config import GatewayConfig, RegisterMap, load_config
 from ..errors import ConfigError
 from ..runtime.poller import Poller, SnapshotHolder
 from .common import config_option
-from .simulated import gateway_params
+from .simulated import PacedClock, gateway_params
 
 
 def _progress(elapsed_s: float, duration_s: float, stats: RecorderStats, final: bool = False) -> None:
@@ -43,8 +45,10 @@ async def record_live(
     device: str | None = None,
     metadata: dict[str, str] | None = None,
     show_progress: bool = True,
+    until: Callable[[], bool] | None = None,
 ) -> RecorderStats:
-    """Poll with ``config`` for ``duration_s`` seconds and write a record to ``out_path``."""
+    """Poll with ``config`` for ``duration_s`` seconds, or until ``until()`` holds (checked
+    every 50 ms), and write a record to ``out_path``."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its errors reach us as read errors
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -65,11 +69,15 @@ async def record_live(
             holder.subscribe(recorder)
             t0 = time.monotonic()
             async with Poller(config, holder):
+                check_s = 0.5 if until is None else 0.05
                 while not stop.is_set() and (elapsed := time.monotonic() - t0) < duration_s:
+                    if until is not None and until():
+                        break
                     if show_progress:
                         _progress(elapsed, duration_s, recorder.stats)
                     with contextlib.suppress(TimeoutError):
-                        await asyncio.wait_for(stop.wait(), timeout=min(0.5, max(0.01, duration_s - elapsed)))
+                        wait_s = min(check_s, max(0.01, duration_s - elapsed))
+                        await asyncio.wait_for(stop.wait(), timeout=wait_s)
             if show_progress:
                 _progress(min(time.monotonic() - t0, duration_s), duration_s, recorder.stats, final=True)
             return recorder.stats
@@ -116,6 +124,16 @@ def record(
         raise SystemExit(1)
 
 
+def _played(array: Any, end_s: float) -> Callable[[], bool]:
+    """True once the simulated ``array`` has sampled up to ``end_s`` of device time (reads its
+    last sample: does not call, and so advance, its clock)."""
+    return lambda: bool(array.last_sample_time_s >= end_s)
+
+
+#: Device seconds a paper replay's simulated device may run between two reads.
+MAX_UNSEEN_DEVICE_S = 4.0
+
+
 async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, object]:
     from sim_device import ArrayConfig, SimArray, serve_tcp
 
@@ -124,7 +142,10 @@ async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, objec
 
     creep_cfg = ArrayConfig(channels=1, columns=1, seed=7, scenario="creep-test", speed=speed)
     stair_cfg = creep_cfg.with_changes(scenario="staircase", speed=speed / 10.0)
-    creep, stair = SimArray(creep_cfg, device_id=1), SimArray(stair_cfg, device_id=2)
+    # paced clocks: a poll at least every MAX_UNSEEN_DEVICE_S of device time, however busy the
+    # machine (the records' sampling, and so the fits' standard errors, do not depend on load)
+    creep = SimArray(creep_cfg, device_id=1, clock=PacedClock(MAX_UNSEEN_DEVICE_S / creep_cfg.speed))
+    stair = SimArray(stair_cfg, device_id=2, clock=PacedClock(MAX_UNSEEN_DEVICE_S / stair_cfg.speed))
     creep_params, stair_params = gateway_params(creep.channel_params), gateway_params(stair.channel_params)
     bench = RegisterMap(force_reference_address=1000, temperature_address=1600)
     divider = Divider(creep_cfg.supply_v, creep_cfg.reference_ohm, creep_cfg.adc_bits)
@@ -136,13 +157,24 @@ async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, objec
         ]
         bus = bus_config_for("sim", "tcp", devices, host="127.0.0.1", port=sim.port, poll_interval_s=0.02)
         config = gateway_config_for([bus])
-        durations = (
-            (creep.scenario.duration_s or 5400.0) / creep_cfg.speed,
-            (stair.scenario.duration_s or 610.0) / stair_cfg.speed,
-        )
+        ends_s = (creep.scenario.duration_s or 5400.0, stair.scenario.duration_s or 610.0)
+        # each record ends when its device has played its scenario; the wall-time limit is a
+        # backstop (a paced device runs slower than its speed only when polls come late)
         await asyncio.gather(
-            record_live(config, creep_path, durations[0], device="creep", show_progress=False),
-            record_live(config, stair_path, durations[1], device="staircase", show_progress=False),
+            *(
+                record_live(
+                    config,
+                    path,
+                    20.0 * end_s / array.config.speed,
+                    device=name,
+                    show_progress=False,
+                    until=_played(array, end_s),
+                )
+                for name, path, array, end_s in (
+                    ("creep", creep_path, creep, ends_s[0]),
+                    ("staircase", stair_path, stair, ends_s[1]),
+                )
+            )
         )
     return creep_path, stair_path, creep_params[0]
 
