@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from gateway.cli.simulated import gateway_params
 from gateway.config import (
@@ -34,7 +35,8 @@ from gateway.modbus.client import ModbusTransport
 from gateway.modbus.image import RegisterImage, decode_sample
 from gateway.model import Divider
 from gateway.runtime.bus import Conversion
-from gateway.runtime.poller import Poller, SnapshotHolder
+from gateway.runtime.clock import CLOCK_STUCK_AFTER_S
+from gateway.runtime.poller import Poller, ReloadReport, SnapshotHolder
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from sim_device import ArrayConfig, SimArray, serve_tcp, serve_tls
@@ -114,7 +116,9 @@ def drift_errors(rows: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]) -
     }
 
 
-def holds_array(channels: int = 16, columns: int = 4, device_id: int = 1) -> SimArray:
+def holds_array(
+    channels: int = 16, columns: int = 4, device_id: int = 1, clock: Callable[[], float] | None = None
+) -> SimArray:
     cfg = ArrayConfig(
         channels=channels,
         columns=columns,
@@ -124,7 +128,7 @@ def holds_array(channels: int = 16, columns: int = 4, device_id: int = 1) -> Sim
         speed=SPEED,
         noise_lsb_rms=2.0,
     )
-    return SimArray(cfg, device_id=device_id)
+    return SimArray(cfg, device_id=device_id, clock=clock)
 
 
 def array_device(array: SimArray, name: str, device_id: int = 1, bench: bool = True) -> DeviceConfig:
@@ -283,8 +287,34 @@ async def test_tls_refuses_an_untrusted_server_and_reads_a_trusted_one(tls_files
     assert dev_snap.device_time_s is not None
 
 
+class PausableClock:
+    """``time.monotonic`` that stands still while paused and resumes where it stopped."""
+
+    def __init__(self) -> None:
+        self._paused_at: float | None = None
+        self._lost_s = 0.0
+
+    def __call__(self) -> float:
+        return (time.monotonic() if self._paused_at is None else self._paused_at) - self._lost_s
+
+    def pause(self) -> None:
+        self._paused_at = time.monotonic()
+
+    def resume(self) -> None:
+        assert self._paused_at is not None
+        self._lost_s += time.monotonic() - self._paused_at
+        self._paused_at = None
+
+
 async def test_reload_keeps_the_creep_state_of_unchanged_channels() -> None:
-    array = holds_array(channels=4, columns=2)
+    # The simulated device's clock is paused across the reload: every poll in that window
+    # reads the same instant, so no poll can move a kept creep state on and "kept" means
+    # "exactly as before" (within rounding), whatever the load. A pause long enough for the
+    # gateway to call the device clock stuck (CLOCK_STUCK_AFTER_S: the host clock takes over)
+    # proves nothing, so such a round is not judged and the next one is tried.
+    clock = PausableClock()
+    array = holds_array(channels=4, columns=2, clock=clock)
+    judged: list[tuple[ReloadReport, NDArray[np.float64], NDArray[np.float64]]] = []
     async with serve_tcp([array], host="127.0.0.1", port=0) as server:
         device = array_device(array, "arr")
         bus = bus_config_for("tcp", "tcp", [device], host="127.0.0.1", port=server.port, poll_interval_s=0.02)
@@ -292,25 +322,45 @@ async def test_reload_keeps_the_creep_state_of_unchanged_channels() -> None:
         async with poller:
             # into the 2 N hold: the creep elements are loaded
             assert await until(lambda: array.device_time_s >= 150.0, 10.0)
-            poller.workers[0].settle_now(poller.workers[0].runners[0])
-            before = poller.workers[0].runners[0].state.model_state.kv1_strain.copy()
-            changed = list(device.channels)
-            changed[1] = dataclasses.replace(
-                changed[1], params=dataclasses.replace(changed[1].params, r0_ohm=1.5e5)
-            )
-            new_device = dataclasses.replace(device, channels=tuple(changed))
-            report = await poller.reload(
-                gateway_config_for([dataclasses.replace(bus, devices=(new_device,))])
-            )
-            after = poller.workers[0].runners[0].state.model_state.kv1_strain.copy()
-            await asyncio.sleep(0.3)
+            for r0_ohm in (1.5e5, 1.6e5, 1.7e5, 1.8e5, 1.9e5):
+                clock.pause()
+                paused_at = time.monotonic()
+                array.advance()  # the device's last sample is at the paused instant
+                instant_s = array.last_sample_time_s
+
+                def converted(instant_s: float = instant_s) -> bool:
+                    t = poller.snapshot().devices["arr"].device_time_s
+                    return t is not None and abs(t - instant_s) < 5e-4  # the clock counts ms
+
+                if await until(converted, 0.5 * CLOCK_STUCK_AFTER_S, step_s=0.005):
+                    worker = poller.workers[0]
+                    worker.settle_now(worker.runners[0])
+                    before = worker.runners[0].state.model_state.kv1_strain.copy()
+                    changed = list(device.channels)
+                    changed[1] = dataclasses.replace(
+                        changed[1], params=dataclasses.replace(changed[1].params, r0_ohm=r0_ohm)
+                    )
+                    new_device = dataclasses.replace(device, channels=tuple(changed))
+                    report = await poller.reload(
+                        gateway_config_for([dataclasses.replace(bus, devices=(new_device,))])
+                    )
+                    after = poller.workers[0].runners[0].state.model_state.kv1_strain.copy()
+                    if time.monotonic() - paused_at < 0.5 * CLOCK_STUCK_AFTER_S:
+                        judged.append((report, before, after))
+                clock.resume()
+                if judged:
+                    break
+
+                def resumed(resume_s: float = instant_s + 1.0) -> bool:
+                    return array.device_time_s >= resume_s
+
+                assert await until(resumed, 10.0)
             snap = poller.snapshot()
+    assert judged, "every reload took longer than half CLOCK_STUCK_AFTER_S with the device clock paused"
+    report, before, after = judged[0]
     assert report.channels_kept == 3 and report.channels_reset == 1
     assert np.all(before > 1e-5)
-    # kept, not reset: a poll that completes while the reload waits for the conversion in
-    # flight may advance the state by one step, so "kept" is "within 1 % of before"
-    assert np.all(after[[0, 2, 3]] > 1e-5)
-    np.testing.assert_allclose(after[[0, 2, 3]], before[[0, 2, 3]], rtol=1e-2)
+    np.testing.assert_allclose(after[[0, 2, 3]], before[[0, 2, 3]], rtol=1e-12)
     assert after[1] == 0.0
     assert snap.devices["arr"].up
     assert snap.counters["arr"].reads_total > 0
