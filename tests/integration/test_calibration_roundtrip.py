@@ -10,6 +10,7 @@ with the bench's reference force.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -70,8 +71,16 @@ async def _record_bench(tmp_path: Path) -> Path:
         cfg_path = tmp_path / "record.toml"
         cfg_path.write_text(_config_text(sim.port, None))
         cfg_path.chmod(0o600)
-        duration = (scenario.duration_s or 0.0) / SPEED
-        await record_live(load_config(cfg_path), out, duration, show_progress=False)
+        end_s = scenario.duration_s or 0.0
+        # until the device has played the protocol (a busy machine starts the poller late);
+        # the wall time is a backstop
+        await record_live(
+            load_config(cfg_path),
+            out,
+            10.0 * end_s / SPEED,
+            show_progress=False,
+            until=lambda: array.last_sample_time_s >= end_s,
+        )
     return out
 
 
@@ -80,6 +89,8 @@ async def _read_with_calibration(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     array = SimArray(ArrayConfig(channels=1, columns=1, seed=SEED, scenario="holds", speed=SPEED / 2), 1)
     rows: list[tuple[float, float, float, int]] = []
+    end_s = array.scenario.duration_s or 0.0
+    played = asyncio.Event()
 
     def take(snap: GatewaySnapshot) -> None:
         dev = snap.devices.get("sensor")
@@ -92,6 +103,8 @@ async def _read_with_calibration(
                     int(dev.status[0]),
                 )
             )
+            if dev.device_time_s >= end_s:
+                played.set()
 
     async with serve_tcp([array], host="127.0.0.1", port=0) as sim:
         cfg_path = tmp_path / "calibrated.toml"
@@ -100,7 +113,10 @@ async def _read_with_calibration(
         holder = SnapshotHolder()
         holder.subscribe(take)
         async with Poller(load_config(cfg_path), holder):
-            await asyncio.sleep((array.scenario.duration_s or 0.0) / (SPEED / 2))
+            # until the gateway has read the scenario to its end (not a fixed sleep: a busy
+            # machine starts the poller late, and the device clock runs from its creation)
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(played.wait(), timeout=10.0 * end_s / (SPEED / 2))
     data = np.array(sorted(set(rows)))
     return data[:, 0], data[:, 1], data[:, 2], data[:, 3].astype(int)
 
