@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from ..model import EFFECT_NAMES, SensorParams, parse_effects
 from .diagnostics import Finding, describe_gaps
-from .discrepancy_choice import CandidateScore, known_state_force_rms
+from .discrepancy_choice import CandidateScore
 from .discrepancy_choice import decide as _decide
 from .discrepancy_choice import penalized as _penalized
 from .fitting import FitData, FitResult, Gap, fit_channel, parameters_for
@@ -320,5 +320,4 @@ def _score(
     effects = parse_effects((*current, effect))
     fit = fit_channel(data, effects, prior)
     added = len(parameters_for(effects)) - len(parameters_for(current))
-    known = known_state_force_rms(data, fit)
-    return CandidateScore(effect, added, fit.gap_test, _penalized(fit, data), fit, known)
+    return CandidateScore(effect, added, fit.gap_test, _penalized(fit, data), fit)

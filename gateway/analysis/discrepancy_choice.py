@@ -25,7 +25,7 @@ added, and the evidence says so.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -153,7 +153,7 @@ def known_state_force_rms(data: FitData, fit: FitResult) -> float:
     model = SensorModel(fit.effects, params)
     temp = None if data.temperature_c is None else data.temperature_c[:, None]
     # a fit with a reference zero offset drives its model with F_ref + offset (fitting.FitResult)
-    force = data.force_n + float(getattr(fit, "force_offset_n", 0.0))
+    force = data.force_n + fit.force_offset_n
     terms, _ = model.simulate(np.maximum(force, 0.0)[:, None], data.time_s, temperature_c=temp)
     state = terms.kv1_strain + terms.kv2_strain + terms.hysteresis_strain
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -191,11 +191,20 @@ def decide(
     now = penalized(fit, data)
     now_rms = fit.gap_test.log_resistance_rms
     now_force = fit.gap_test.force_rms_n
-    now_known = known_state_force_rms(data, fit)
-    known = {
-        c.effect: c.known_force_n if math.isfinite(c.known_force_n) else known_state_force_rms(data, c.fit)
-        for c in scored
-    }
+    by_effect = {c.effect: c for c in scored}
+    cache: dict[str | None, float] = {}
+
+    def known(effect: str | None) -> float:
+        """The known-state held-out force RMS of a candidate (None: of ``fit``), computed only
+        where it is read: it re-simulates and inverts the whole record."""
+        if effect not in cache:
+            c = None if effect is None else by_effect[effect]
+            given = math.nan if c is None else c.known_force_n
+            cache[effect] = (
+                given if math.isfinite(given) else known_state_force_rms(data, c.fit if c else fit)
+            )
+        return cache[effect]
+
     table = "; ".join(
         f"{c.effect} {c.gap_test.log_resistance_rms:.4f} / {c.gap_test.force_rms_n:.4g} N" for c in scored
     )
@@ -206,8 +215,8 @@ def decide(
         for c in scored
         if c.effect in tracked_worse
         and (
-            _worse_force(known[c.effect], now_known, force_floor)
-            or not (math.isfinite(known[c.effect]) and math.isfinite(now_known))
+            _worse_force(known(c.effect), known(None), force_floor)
+            or not (math.isfinite(known(c.effect)) and math.isfinite(known(None)))
         )
     ]
     eligible = [c for c in scored if c.effect not in worse_force]
@@ -226,13 +235,13 @@ def decide(
     gain = now - best.score
     rel = 1.0 - best.gap_test.log_resistance_rms / now_rms if now_rms > 0 else 0.0
     if gain < MIN_SCORE_GAIN or rel < MIN_RELATIVE_GAIN:
-        by_force = _force_route(fit, eligible, findings, now, now_known, known)
+        by_force = _force_route(fit, eligible, findings, now, known)
         if by_force is not None:
             c, finding = by_force
             return (
                 c.effect,
                 f"held-out force RMS {now_force:.4g} -> {c.gap_test.force_rms_n:.4g} N "
-                f"({now_known:.4g} -> {known[c.effect]:.4g} N with the state the reference force drives) "
+                f"({known(None):.4g} -> {known(c.effect):.4g} N with the state the reference force drives) "
                 f"with {c.effect} (+{c.added_parameters} parameters{_undetermined(c)}), log-resistance "
                 f"RMS {now_rms:.4f} -> {c.gap_test.log_resistance_rms:.4f}, score {now:.1f} -> "
                 f"{c.score:.1f}: no clear win on log-resistance, added on the force; it answers: "
@@ -268,7 +277,7 @@ def decide(
         tracking = (
             f"; with the state tracked from its own readings the held-out force gets worse "
             f"({now_force:.4g} -> {best.gap_test.force_rms_n:.4g} N), with the state the reference force "
-            f"drives it does not ({now_known:.4g} -> {known[best.effect]:.4g} N): the read-out noise moves "
+            f"drives it does not ({known(None):.4g} -> {known(best.effect):.4g} N): the read-out noise moves "
             f"the tracked {best.effect} state"
         )
     evidence = (
@@ -294,22 +303,20 @@ def _force_route(
     eligible: Sequence[CandidateScore],
     findings: Sequence[Finding],
     now: float,
-    now_known: float,
-    known: dict[str, float],
+    known: Callable[[str | None], float],
 ) -> tuple[CandidateScore, Finding] | None:
-    """The candidate the force route adds (with the finding it answers), or None."""
+    """The candidate the force route adds (with the finding it answers), or None; ``known``
+    gives the known-state held-out force RMS of a candidate (None: of ``fit``)."""
     best: tuple[float, CandidateScore, Finding] | None = None
     for c in eligible:
         answers = [f for f in findings if f.axis in EFFECT_AXES.get(c.effect, frozenset())]
-        tracked = _force_gain(c.gap_test.force_rms_n, fit.gap_test.force_rms_n)
-        own = _force_gain(known[c.effect], now_known)
-        if (
-            answers
-            and c.score < now
-            and c.gap_test.log_resistance_rms < fit.gap_test.log_resistance_rms
-            and min(tracked, own) >= MIN_FORCE_GAIN
-            and (best is None or own > best[0])
+        if not (
+            answers and c.score < now and c.gap_test.log_resistance_rms < fit.gap_test.log_resistance_rms
         ):
+            continue
+        tracked = _force_gain(c.gap_test.force_rms_n, fit.gap_test.force_rms_n)
+        own = _force_gain(known(c.effect), known(None))
+        if min(tracked, own) >= MIN_FORCE_GAIN and (best is None or own > best[0]):
             best = (own, c, answers[0])
     return None if best is None else (best[1], best[2])
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +31,7 @@ from .objectives import (
     Problem,
     check_objective,
     f_scale,
+    log_ratio,
     offset_bounds,
 )
 from .records import ChannelRecord
@@ -253,12 +255,12 @@ def fit_channel(
     reasons.update({name: "fixed by request" for name in fix if name in names})
     free = tuple(n for n in names if n not in reasons)
     how = _How(objective, loss, f_scale(objective, data.force_n, data.usable))
-    params, offset, x, jac, cost = _solve(data, chosen, prior, force_offset_n, free, how)
+    params, offset, jac, residual, cost = _solve(data, chosen, prior, force_offset_n, free, how)
     # a parameter the data leave undetermined is fixed at its prior, and the rest refitted (until
     # none is left; the default log-R fit keeps its three rounds, so that it is unchanged)
     rounds = 3 if objective == "log_r" and not fit_force_offset else len(free)
     for _ in range(rounds):
-        sigma = _sigma(jac, Problem(data, chosen, params, free, objective, offset).residual(x), len(free))
+        sigma = _sigma(jac, residual, len(free))
         loose = [n for n, s in zip(free, sigma, strict=True) if not (s < _loose_sigma(n, data))]
         if not loose:
             break
@@ -270,11 +272,10 @@ def fit_channel(
             offset = force_offset_n
         else:
             params = replace(params, **{worst: getattr(prior, worst)})
-        params, offset, x, jac, cost = _solve(data, chosen, params, offset, free, how)
-    problem = Problem(data, chosen, params, free, objective, offset)
-    model_all = problem.model_ohm(params)
-    residual_all = problem.log_residual(params)
-    sigma = _sigma(jac, problem.residual(problem.x0()), len(free))
+        params, offset, jac, residual, cost = _solve(data, chosen, params, offset, free, how)
+    model_all = Problem(data, chosen, params, free, objective, offset).model_ohm(params)
+    residual_all = log_ratio(data.resistance_ohm, model_all)
+    sigma = _sigma(jac, residual, len(free))
     corr = _correlation(jac, len(free))
     estimates = []
     for name in names:
@@ -370,6 +371,14 @@ class _How:
     f_scale: float
 
 
+class _Solution(NamedTuple):
+    params: SensorParams
+    offset: float
+    jac: FloatArray  # at the solution, in x re-expressed around it (x = 0 there)
+    residual: FloatArray  # the residuals at the solution (for the intervals' scale)
+    cost: float
+
+
 def _solve(
     data: FitData,
     effects: tuple[str, ...],
@@ -377,10 +386,10 @@ def _solve(
     offset: float,
     free: tuple[str, ...],
     how: _How,
-) -> tuple[SensorParams, float, FloatArray, FloatArray, float]:
+) -> _Solution:
     problem = Problem(data, effects, prior, free, how.objective, offset)
     if not free or not problem.train.any():
-        return prior, offset, np.zeros(0), np.zeros((0, 0)), math.nan
+        return _Solution(prior, offset, np.zeros((0, 0)), np.zeros(0), math.nan)
     lo, hi = problem.bounds()
     x0 = np.clip(problem.x0(), lo, hi)
     result = least_squares(
@@ -395,14 +404,15 @@ def _solve(
     params, offset = problem.params(result.x), problem.offset(result.x)
     # re-express x around the fitted parameters (x = 0 there) for the intervals
     around = Problem(data, effects, params, free, how.objective, offset)
-    x = around.x0()
-    return params, offset, x, _jacobian(around, x), float(result.cost)
+    jac, residual = _jacobian(around, around.x0())
+    return _Solution(params, offset, jac, residual, float(result.cost))
 
 
-def _jacobian(problem: Problem, x: FloatArray) -> FloatArray:
-    """Finite-difference Jacobian of the residuals (no robust-loss weighting): central, or
-    one-sided at a bound (a slope fitted at 0 would otherwise be evaluated below 0, where the
-    parameters are invalid and the residual a constant, and the other intervals collapse)."""
+def _jacobian(problem: Problem, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Finite-difference Jacobian of the residuals (no robust-loss weighting), and the
+    residuals at ``x``: central, or one-sided at a bound (a slope fitted at 0 would otherwise be
+    evaluated below 0, where the parameters are invalid and the residual a constant, and the
+    other intervals collapse)."""
     base = problem.residual(x)
     lo, hi = problem.bounds()
     jac = np.empty((base.size, x.size))
@@ -416,7 +426,7 @@ def _jacobian(problem: Problem, x: FloatArray) -> FloatArray:
         r_up = base if up[i] == x[i] else problem.residual(up)
         r_down = base if down[i] == x[i] else problem.residual(down)
         jac[:, i] = (r_up - r_down) / float(up[i] - down[i])
-    return jac
+    return jac, base
 
 
 def _sigma(jac: FloatArray, residual: FloatArray, k: int) -> FloatArray:

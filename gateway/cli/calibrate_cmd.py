@@ -8,7 +8,14 @@ from pathlib import Path
 
 import click
 
-from ..analysis.calibration import MODELS, calibrate, format_report, write_calibration
+from ..analysis.calibration import (
+    MODELS,
+    OBJECTIVE_CHOICES,
+    OFFSET_CHOICES,
+    calibrate,
+    format_report,
+    write_calibration,
+)
 from ..analysis.records import DEFAULT_CHANNEL, read_record
 from ..errors import RecordError
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
@@ -31,7 +38,7 @@ from .common import parse_assignments
 )
 @click.option(
     "--objective",
-    type=click.Choice(("auto", "log-r", "force")),
+    type=click.Choice(tuple(c.replace("_", "-") for c in OBJECTIVE_CHOICES)),
     default="auto",
     show_default=True,
     help="what the physical model's fit minimises: log-r (log-resistance residuals weighted by the "
@@ -41,7 +48,7 @@ from .common import parse_assignments
 @click.option(
     "--force-offset",
     "force_offset",
-    type=click.Choice(("auto", "fit", "none")),
+    type=click.Choice(OFFSET_CHOICES),
     default="auto",
     show_default=True,
     help="reference-force zero offset (the model is driven by F_ref + offset): fit it, leave it out, or "

@@ -83,21 +83,20 @@ def _adc_channels(clock: ClockCandidate, series: Mapping[int, list[int | None]],
         return False
     if left and right and _frame(clock.table, sorted(left + right), series, n_snapshots) is not None:
         return True
+    top = [v for v in series[clock.address] if v is not None]
     if bool(left) != bool(right) and clock.registers == 1:
         # the first or last register of a frame whose noise happened to rise at every round:
         # the rest of the frame is a frame by itself and the "clock" reads inside its codes
         rest = sorted(left or right)
         codes = [v for a in rest for v in series[a] if v is not None]
-        own = [v for v in series[clock.address] if v is not None]
         if (
             codes
-            and own
+            and top
             and _frame(clock.table, rest, series, n_snapshots) is not None
-            and min(codes) <= min(own)
-            and max(own) <= max(codes)
+            and min(codes) <= min(top)
+            and max(top) <= max(codes)
         ):
             return True
-    top = [v for v in series[clock.address] if v is not None]
     top_moves = sum(1 for a, b in itertools.pairwise(top) if a != b)
     neighbours = (series.get(clock.address - 1), series.get(clock.end + 1))
     return clock.registers > 1 and top_moves >= 2 and any(_moving(v) for v in neighbours)
