@@ -25,6 +25,8 @@ import numpy as np
 
 from ..atomic import atomic_write_text
 from ..model import EFFECT_PARAMETERS, SensorParams, parameter_names, parse_effects
+from ..model.curves import CurveChannel
+from .candidates import Candidate, hold_drift_pct, rank_candidates
 from .diagnostics import residual_axes
 from .discrepancy import decimate
 from .fitting import FitData, FitResult, fit_channel
@@ -63,24 +65,45 @@ class Calibration:
     record_range_n: tuple[float, float] = (math.nan, math.nan)  # the record's loaded range, as F_ref
     notes: tuple[str, ...] = field(default=())
     warnings: tuple[str, ...] = field(default=())
+    #: every static curve with every drift form (``candidates``), best held-out force first
+    candidates: tuple[Candidate, ...] = field(default=())
+    #: per calibration name: the drift across held-out holds (% of full scale; NaN: no hold)
+    hold_drift_pct_fs: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def line_force_rms_n(self) -> float:
         return self.rivals.line_force_rms_n
 
     def force_rms(self) -> dict[str, float]:
-        return {
+        """Held-out force RMS (N) of every calibration: the physical model, the paper's line,
+        the monotone lookup, and every curve-with-drift candidate by its name."""
+        out = {
             "physics": self.fit.gap_test.force_rms_n,
             "line": self.rivals.line_force_rms_n,
             "lookup": self.rivals.lookup_force_rms_n,
         }
+        out.update({c.name: c.held_out_force_rms_n for c in self.candidates})
+        return out
+
+    def n_parameters(self) -> dict[str, int]:
+        out = {"physics": self.fit.n_parameters, "line": 2, "lookup": 2 * len(self.rivals.lookup.force_n)}
+        out.update({c.name: c.n_parameters for c in self.candidates})
+        return out
+
+    def ranking(self) -> list[tuple[str, float, float, int]]:
+        """(name, held-out force RMS N, drift across held-out holds % FS, parameters), best first."""
+        rms, n = self.force_rms(), self.n_parameters()
+        rows = [(k, v, self.hold_drift_pct_fs.get(k, math.nan), n[k]) for k, v in rms.items()]
+        return sorted(rows, key=lambda r: (r[1] if math.isfinite(r[1]) else math.inf, r[3]))
 
     @property
     def best(self) -> str:
-        """The calibration that reads held-out force best (physics on a tie within 2 %)."""
-        rms = {k: (v if math.isfinite(v) else math.inf) for k, v in self.force_rms().items()}
-        best = min(rms, key=lambda k: rms[k])
-        return "physics" if rms["physics"] <= 1.02 * rms[best] else best
+        """The calibration that reads held-out force best (the fewer parameters on an exact tie):
+        never one that reads it worse than the best of the line and the lookup."""
+        return self.ranking()[0][0]
+
+    def candidate(self, name: str) -> Candidate | None:
+        return next((c for c in self.candidates if c.name == name), None)
 
     @property
     def verdict(self) -> str:
@@ -134,6 +157,15 @@ class Calibration:
             "lookup": {"held_out_force_rms_n": self.rivals.lookup_force_rms_n},
             "held_out_force_rms_n": self.force_rms(),
             "best": self.best,
+            "ranking": [
+                {
+                    "name": name,
+                    "held_out_force_rms_n": rms,
+                    "hold_drift_pct_fs": None if math.isnan(drift) else drift,
+                    "parameters": n,
+                }
+                for name, rms, drift, n in self.ranking()
+            ],
             "verdict": self.verdict,
             "noise": {
                 "estimated": self.noise.estimated,
@@ -254,6 +286,18 @@ def calibrate(
         )
     rivals = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test)
     test = data.test
+    cands = tuple(rank_candidates(data, real_time=time_is_real(meta)))
+    fs = float(hi)
+    drifts = {c.name: c.hold_drift_pct_fs for c in cands}
+    drifts["physics"] = hold_drift_pct(
+        data.time_s, data.force_n + fit.force_offset_n, fit.force_inverted_n, test, fs
+    )
+    drifts["line"] = hold_drift_pct(
+        data.time_s, data.force_n, rivals.line.force(data.resistance_ohm), test, fs
+    )
+    drifts["lookup"] = hold_drift_pct(
+        data.time_s, data.force_n, rivals.lookup.force(data.resistance_ohm), test, fs
+    )
     return Calibration(
         channel=channel.name,
         record=record_name,
@@ -273,6 +317,8 @@ def calibrate(
         offset_mode=force_offset,
         notes=tuple(notes),
         warnings=tuple(warnings),
+        candidates=cands,
+        hold_drift_pct_fs=drifts,
     )
 
 
@@ -406,6 +452,9 @@ def calibration_toml(
                 f"held_out_force_rms_n = {_toml_float(cal.rivals.line_force_rms_n)}",
                 *line_range_lines(cal.rivals.line, low),
             ]
+        elif (cand := cal.candidate(kind)) is not None:
+            rivals += ["", f'[curve."{name}"]', *curve_table_lines(cand.channel, cal.record_range_n)]
+            rivals.append(f"held_out_force_rms_n = {_toml_float(cand.held_out_force_rms_n)}")
         elif kind == "lookup":
             lk = cal.rivals.lookup
             rivals += [
@@ -416,6 +465,22 @@ def calibration_toml(
                 f"held_out_force_rms_n = {_toml_float(cal.rivals.lookup_force_rms_n)}",
             ]
     return "\n".join(lines + rivals) + "\n"
+
+
+def curve_table_lines(channel: CurveChannel, calibrated_range_n: tuple[float, float]) -> list[str]:
+    """The body of a ``[curve.<name>]`` table (``gateway.model.curves.curve_from_table``): kind,
+    the static curve's parameters, the sensitivity, the drift and the calibrated force range."""
+    out = [f'kind = "{channel.curve.kind}"']
+    for key, value in channel.curve.table().items():
+        if isinstance(value, list):
+            out.append(f"{key} = [" + ", ".join(_toml_float(v) for v in value) + "]")
+        else:
+            out.append(f"{key} = {_toml_float(value)}")
+    out += [f"gain = {_toml_float(channel.gain)}", f"offset_n = {_toml_float(channel.offset_n)}"]
+    out += [f"{key} = {_toml_float(value)}" for key, value in channel.drift.table().items()]
+    low, high = calibrated_range_n
+    out += [f"force_min_n = {_toml_float(max(low, 0.0))}", f"force_max_n = {_toml_float(high)}"]
+    return out
 
 
 def _toml_float(value: float) -> str:
@@ -493,7 +558,24 @@ def format_report(cal: Calibration) -> str:
         f"  noise floor (measurement model)  {cal.noise_floor_log:>18.4f} {cal.noise_floor_force_n:>15.4f}"
     )
     out.append(f"    m = {cal.rivals.line.slope_s_per_n:.6g} S/N, n = {cal.rivals.line.intercept_s:.6g} S")
+    out.append("")
+    out += ranking_lines(cal)
     out.append(f"verdict: {cal.verdict}; best on held-out force: {cal.best}")
     if cal.best != "physics":
-        out.append(f"  (write it as the channel's model with --model {cal.best} or --model auto)")
+        how = f"--model {cal.best} or --model auto" if cal.best in MODELS else "--model auto"
+        out.append(f"  (write it as the channel's model with {how})")
     return "\n".join(out)
+
+
+def ranking_lines(cal: Calibration) -> list[str]:
+    """Every calibration ranked on held-out force (the table of the report)."""
+    rows = cal.ranking()
+    out = [
+        f"ranking on held-out force ({cal.fit.n_test} rows, tracked as the runtime reads them):",
+        f"  {'calibration':<30} {'force RMS (N)':>13} {'hold drift (% FS)':>18} {'parameters':>10}",
+    ]
+    for i, (name, rms, drift, n) in enumerate(rows):
+        d = "-" if math.isnan(drift) else f"{drift:.2f}"
+        mark = "  <- best" if i == 0 else ""
+        out.append(f"  {name:<30} {rms:>13.4f} {d:>18} {n:>10}{mark}")
+    return out

@@ -123,7 +123,8 @@ def _unknown_channel(cal_ctx: Context, where: str, name: str, channel_names: Seq
 def _conversion_tables(
     cal_ctx: Context, data: dict[str, Any], channel_names: Sequence[str]
 ) -> dict[str, tuple[str, dict[str, Any]]]:
-    """``[line.<name>]`` / ``[lookup.<name>]`` tables by channel: (kind, table), checked later."""
+    """``[line.<name>]`` / ``[lookup.<name>]`` / ``[curve.<name>]`` tables by channel: (kind,
+    table), checked later."""
     out: dict[str, tuple[str, dict[str, Any]]] = {}
     for kind in CONVERSION_KINDS:
         tables = data.get(kind, {})
@@ -136,7 +137,9 @@ def _conversion_tables(
             if not isinstance(body, dict):
                 raise cal_ctx.error(where, f"expected a table [{where}], got {type_name(body)}")
             if name in out:
-                raise cal_ctx.error(where, f"channel {name!r} has a [line] and a [lookup] table; keep one")
+                raise cal_ctx.error(
+                    where, f"channel {name!r} has a [{out[name][0]}] and a [{kind}] table; keep one"
+                )
             out[name] = (kind, body)
     return out
 

@@ -19,6 +19,7 @@ from ..modbus.plan import MODBUS_MAX_READ
 from ..modbus.register_map import ENCODINGS, DeviceChecks, RegisterMap
 from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
 from ..model.conversion import Conversion, LineConversion, LookupConversion
+from ..model.curves import CurveChannel
 from ..model.params import Interval
 from .layout import GridLayout
 from .mqtt import MqttConfig
@@ -174,9 +175,11 @@ class ChannelConfig:
             raise ConfigError(f"{where}: effects: {self.effects!r} must be in canonical order: {canonical!r}")
         if not isinstance(self.params, SensorParams):
             raise ConfigError(f"{where}: params: expected SensorParams, got {type(self.params).__name__}")
-        if self.conversion is not None and not isinstance(self.conversion, LineConversion | LookupConversion):
+        if self.conversion is not None and not isinstance(
+            self.conversion, LineConversion | LookupConversion | CurveChannel
+        ):
             raise ConfigError(
-                f"{where}: conversion: expected None, LineConversion or LookupConversion, "
+                f"{where}: conversion: expected None, LineConversion, LookupConversion or CurveChannel, "
                 f"got {type(self.conversion).__name__}"
             )
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .curves import CurveChannel, CurveError, curve_from_table
 from .inversion import ForceStatus
 
 __all__ = [
@@ -40,8 +41,9 @@ FloatArray = NDArray[np.float64]
 StatusArray = NDArray[np.int8]
 BoolArray = NDArray[np.bool_]
 
-#: The calibration-file tables that name a conversion, by kind.
-CONVERSION_KINDS = ("line", "lookup")
+#: The calibration-file tables that name a conversion, by kind (``curve``: a static curve with
+#: drift correction on top, ``gateway.model.curves``; tracked, not stateless).
+CONVERSION_KINDS = ("line", "lookup", "curve")
 _LINE_KEYS = ("slope_s_per_n", "intercept_s", "force_min_n", "force_max_n", "held_out_force_rms_n")
 _LOOKUP_KEYS = ("resistance_ohm", "force_n", "held_out_force_rms_n")
 
@@ -164,7 +166,7 @@ class LookupConversion:
         return float(np.exp(-(log_r[j - 1] + t * (log_r[j] - log_r[j - 1]))))
 
 
-Conversion = LineConversion | LookupConversion
+Conversion = LineConversion | LookupConversion | CurveChannel
 
 
 def conversion_from_table(
@@ -173,6 +175,11 @@ def conversion_from_table(
     """A conversion from a calibration file's ``[line.<name>]`` / ``[lookup.<name>]`` table;
     a line without its own force range takes the channel's (``force_min_n``/``force_max_n``).
     ``ConversionError`` names the key."""
+    if kind == "curve":
+        try:
+            return curve_from_table(data)
+        except CurveError as exc:
+            raise ConversionError(exc.key, exc.message) from None
     allowed = _LINE_KEYS if kind == "line" else _LOOKUP_KEYS
     for key in data:
         if key not in allowed:

@@ -41,6 +41,7 @@ from ..errors import DecodeError
 from ..modbus.image import RawSample
 from ..model import ModelState, SensorModel
 from ..model.conversion import ConversionSet
+from ..model.curves import CurveChannel, CurveSet, CurveState
 from .baseline import BaselineCorrection
 from .clock import NO_CLOCK_HISTORY, ClockHealth, time_step
 from .snapshot import (
@@ -80,6 +81,8 @@ class DeviceState:
     time_from_device: bool = False
     last: DeviceSnapshot | None = None
     clock: ClockHealth = NO_CLOCK_HISTORY
+    #: the drift state of the channels read through a curve (``gateway.model.curves``)
+    curve_state: CurveState | None = None
 
 
 def state_arrays(state: ModelState) -> list[FloatArray]:
@@ -127,6 +130,8 @@ class TrackedSample:
     temperature_c: FloatArray | None
     state: DeviceState
     wall_time_s: float
+    #: the static (not drift-corrected) force of every converted channel (N), NaN elsewhere
+    converted_static_n: FloatArray | None = None
 
 
 class DeviceProcessor:
@@ -145,8 +150,15 @@ class DeviceProcessor:
         for a in (self.index, self.x_mm, self.y_mm):
             a.setflags(write=False)
         # channels with a line or lookup are read with it, outside the physical model's groups
-        converted = any(c.conversion is not None for c in chans)
+        converted = any(
+            c.conversion is not None and not isinstance(c.conversion, CurveChannel) for c in chans
+        )
         self.conversions = ConversionSet([c.conversion for c in chans]) if converted else None
+        curves = [(k, c.conversion) for k, c in enumerate(chans) if isinstance(c.conversion, CurveChannel)]
+        self.curves = CurveSet([c for _, c in curves], [k for k, _ in curves]) if curves else None
+        self._curve_keys = tuple(
+            channel_key(device, chans[k]) for k in (() if self.curves is None else self.curves.positions)
+        )
         by_effects: dict[tuple[str, ...], list[int]] = {}
         for k, c in enumerate(chans):
             if c.conversion is None:
@@ -169,6 +181,8 @@ class DeviceProcessor:
                 r0[ks] = model.resistance(np.zeros(len(ks)))
         if self.conversions is not None:  # a line's or lookup's unloaded end (its lower force bound)
             r0[self.conversions.positions] = self.conversions.unloaded_ohm
+        if self.curves is not None:  # a curve reads no load on an open sensor
+            r0[self.curves.positions] = np.inf
         self._baseline = BaselineCorrection.of([c.baseline_ohm for c in chans], r0)
 
     def _tare(self, r_model: FloatArray) -> FloatArray:
@@ -202,8 +216,16 @@ class DeviceProcessor:
         if kept == 0:
             return DeviceState(model_state)
         last = state.last if state.last is not None and state.last.channel_names == self.names else None
+        # curve channels keep their drift state only when every one of them is unchanged
+        curve_state = state.curve_state if self._curve_keys == old._curve_keys else None
         return DeviceState(
-            model_state, state.last_time_s, state.last_host_time_s, state.time_from_device, last, state.clock
+            model_state,
+            state.last_time_s,
+            state.last_host_time_s,
+            state.time_from_device,
+            last,
+            state.clock,
+            curve_state,
         )
 
     def kept_channels(self, old: DeviceProcessor) -> int:
@@ -322,9 +344,21 @@ class DeviceProcessor:
             new_state_model = state_from_arrays(new)
             if self.conversions is not None:
                 self.conversions.apply(r_model, force, model_status)
+        static: FloatArray | None = None
+        curve_state = state.curve_state
+        if self.curves is not None:
+            pos = self.curves.positions
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                f, st, x, _, curve_state = self.curves.track(
+                    r_model[pos], curve_state or self.curves.initial_state(), dt
+                )
+            force[pos], model_status[pos] = f, st
+            static = np.full(n, np.nan)
+            static[pos] = np.where(np.isnan(f), np.nan, np.maximum(x, 0.0))
         return TrackedSample(
             raw, r_out, r_model, base, force, model_status, temperature,
-            DeviceState(new_state_model, now, host_time_s, use_device, None, clock_health), wall_time_s,
+            DeviceState(new_state_model, now, host_time_s, use_device, None, clock_health, curve_state),
+            wall_time_s, static,
         )  # fmt: skip
 
     def finish(self, tracked: TrackedSample) -> tuple[DeviceSnapshot, DeviceState]:
@@ -349,11 +383,19 @@ class DeviceProcessor:
             read_only(valued),
             read_only(force),
         )
-        static = (
-            StaticEstimate(*inputs)
-            if self.conversions is None
-            else _StaticWithConversions(*inputs, self.conversions.positions, force)
-        )
+        static: StaticEstimate
+        if self.conversions is None and self.curves is None:
+            static = StaticEstimate(*inputs)
+        else:
+            converted = np.concatenate(
+                [c.positions for c in (self.conversions, self.curves) if c is not None]
+            ).astype(np.intp)
+            by_channel = np.array(force, dtype=np.float64)
+            if tracked.converted_static_n is not None and self.curves is not None:
+                by_channel[self.curves.positions] = tracked.converted_static_n[self.curves.positions]
+            static = _StaticWithConversions(
+                *inputs, converted, read_only(np.where(valued, by_channel, np.nan))
+            )
         snap = DeviceSnapshot(
             device=self.device.name,
             bus=self.bus,

@@ -1,0 +1,321 @@
+"""Empirical calibrations: every static curve with every drift form, fitted and ranked.
+
+A candidate is a static curve (``gateway.model.curves``: power law G = k F^n, conductance
+line, monotone lookup) with one of the drift forms (static, creep, creep2, hysteresis and
+their combinations). Each is fitted on the training rows of the same ``FitData`` that the
+physical model and the discrepancy workflow use, and judged on its held-out rows by the
+*tracked* force: ``curves.track_series`` runs the runtime's per-sample tracker over the whole
+record (state from every row, unusable ones included) and the error is taken on the held-out
+rows only. Nothing a candidate reads on held-out rows was fitted on them.
+
+Fitting one candidate (the reference force drives the state, as in the physical model's fit):
+
+1. the apparent force the curve should read is x = F (1 + beta s) + a1 K1[F] + a2 K2[F]: K_i
+   is a Kelvin element of unit fraction driven by the reference force (exact exponential
+   steps, the tracker's convention), s the play's direction before each sample;
+2. the static curve is fitted to (x, R) on the training rows (force-space least squares for
+   the power law and the line; pooled adjacent violators for the lookup);
+3. with the curve's x_hat = curve(R), the fractions a1, a2, beta solve the linear least squares
+   x_hat - F = a1 K1 + a2 K2 + beta F s; the time constants and the play width are chosen on
+   a grid by the training residual, then steps 2-3 alternate a few times.
+
+``rank_candidates`` returns every candidate's held-out force RMS, its drift across held-out
+holds (end minus start error, % of full scale) and its parameter count, best first.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from ..model.curves import (
+    CURVE_KINDS,
+    DRIFT_FORMS,
+    CurveChannel,
+    Drift,
+    LineCurve,
+    LookupCurve,
+    PowerLawCurve,
+    StaticCurve,
+    track_series,
+)
+from .fitting import FitData
+from .holds import find_holds
+from .rivals import LOOKUP_KNOTS, MonotoneLookup
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+TAU1_GRID_S = (1.0, 3.0, 10.0, 30.0)
+TAU2_GRID_S = (100.0, 300.0, 1000.0)
+WIDTH_GRID_FS = (0.02, 0.06, 0.15)  # play width as a share of the record's full scale
+ALTERNATIONS = 3
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One fitted candidate and how it reads the held-out rows."""
+
+    name: str
+    channel: CurveChannel
+    held_out_force_rms_n: float
+    hold_drift_pct_fs: float  # RMS over held-out holds of (end - start) error, % of full scale
+    train_force_rms_n: float
+    force_n: FloatArray = field(repr=False)  # the tracked force on every row of the data
+
+    @property
+    def kind(self) -> str:
+        return self.channel.curve.kind
+
+    @property
+    def drift_form(self) -> str:
+        return self.channel.drift.form
+
+    @property
+    def n_parameters(self) -> int:
+        return self.channel.n_parameters
+
+
+def rms(values: FloatArray) -> float:
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
+
+
+def kelvin_response(held_n: FloatArray, dt_s: FloatArray, tau_s: float) -> FloatArray:
+    """z_k = e_k z_{k-1} + (1 - e_k) held_k, e_k = exp(-dt_k / tau), z before the first = 0:
+    a unit-fraction Kelvin element driven by the force held over each interval. Solved in
+    closed form over chunks of at most 600 time constants (no overflow), exactly."""
+    n = held_n.size
+    out = np.empty(n)
+    cum = np.cumsum(dt_s / tau_s)
+    z, start = 0.0, 0
+    while start < n:
+        base = cum[start - 1] if start else 0.0
+        end = max(int(np.searchsorted(cum, base + 600.0, side="left")), start + 1)
+        e = np.exp(-dt_s[start:end] / tau_s)
+        b = (1.0 - e) * held_n[start:end]
+        if end == start + 1:
+            out[start] = e[0] * z + b[0]
+        else:
+            lc = cum[start:end] - base
+            out[start:end] = np.exp(-lc) * (z + np.cumsum(np.exp(lc) * b))
+        z = float(out[end - 1])
+        start = end
+    return out
+
+
+def play_direction(force_n: FloatArray, width_n: float) -> FloatArray:
+    """s before each sample: the play p <- clip(p, F - w, F + w) of the previous samples,
+    s = clip((p - F_prev) / w, -1, 1), 0 before the first (the tracker's convention)."""
+    out = [0.0] * force_n.size
+    p = held = 0.0
+    for k, f in enumerate(force_n.tolist()):
+        s = (p - held) / width_n
+        out[k] = -1.0 if s < -1.0 else 1.0 if s > 1.0 else s
+        held = f
+        p = f - width_n if p < f - width_n else f + width_n if p > f + width_n else p
+    return np.asarray(out)
+
+
+def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> StaticCurve:
+    """The static curve of ``kind`` through (apparent force, R) rows (finite, F > 0, R > 0)."""
+    ok = np.isfinite(force_n) & np.isfinite(resistance_ohm) & (resistance_ohm > 0) & (force_n > 0)
+    f, r = force_n[ok], resistance_ohm[ok]
+    if f.size < 4 or np.ptp(f) <= 0.0:
+        raise ValueError("a curve needs at least four rows at two or more distinct forces")
+    g = 1.0 / r
+    if kind == "line":
+        # force-space least squares: F = (G - c) / m = alpha G + beta
+        alpha, beta = np.polyfit(g, f, 1)
+        if not alpha > 0.0:
+            raise ValueError("the conductance does not rise with force on these rows")
+        return LineCurve(float(1.0 / alpha), float(-beta / alpha))
+    if kind == "power_law":
+        n0, lnk0 = np.polyfit(np.log(f), np.log(g), 1)
+        if not n0 > 0.0:
+            raise ValueError("the conductance does not rise with force on these rows")
+        lg = np.log(g)
+
+        def resid(p: FloatArray) -> FloatArray:
+            return np.asarray(np.exp((lg - p[0]) / p[1]) - f)
+
+        sol = least_squares(resid, np.array([lnk0, n0]), bounds=([-60.0, 0.05], [20.0, 10.0]), x_scale="jac")
+        lnk, n = (float(v) for v in (sol.x if sol.success else (lnk0, n0)))
+        return PowerLawCurve(math.exp(lnk), n)
+    if kind == "lookup":
+        lk = MonotoneLookup.fit(f, r, LOOKUP_KNOTS)
+        lr = np.asarray(lk.log_r)
+        keep = np.concatenate([[True], np.diff(lr) > 1e-9])
+        lr, kf = lr[keep], np.asarray(lk.force_n)[keep]
+        if lr.size < 2 or not kf[0] > kf[-1]:
+            raise ValueError("the lookup found no force range on these rows")
+        return LookupCurve(tuple(float(math.exp(v)) for v in lr), tuple(float(v) for v in kf))
+    raise ValueError(f"unknown curve kind {kind!r}; allowed: {', '.join(CURVE_KINDS)}")
+
+
+class _Regressors:
+    """The reference-driven drift regressors of one record, computed once per grid value."""
+
+    def __init__(self, data: FitData) -> None:
+        self.data = data
+        f = np.nan_to_num(np.asarray(data.force_n, dtype=np.float64), nan=0.0)
+        self.force = f
+        self.held = np.maximum(np.concatenate([[0.0], f[:-1]]), 0.0)
+        t = data.time_s
+        self.dt = np.maximum(np.diff(t, prepend=t[:1]), 0.0)
+        usable = data.usable & (f > 0)
+        self.full_scale = float(np.max(f[usable])) if usable.any() else 1.0
+        self._k: dict[float, FloatArray] = {}
+        self._s: dict[float, FloatArray] = {}
+
+    def kelvin(self, tau_s: float) -> FloatArray:
+        if tau_s not in self._k:
+            self._k[tau_s] = kelvin_response(self.held, self.dt, tau_s)
+        return self._k[tau_s]
+
+    def hysteresis(self, width_n: float) -> FloatArray:
+        if width_n not in self._s:
+            self._s[width_n] = self.force * play_direction(np.maximum(self.force, 0.0), width_n)
+        return self._s[width_n]
+
+
+def _grid(form: str, full_scale: float) -> list[tuple[float, float, float]]:
+    """(tau1, tau2, width) triples to try for a drift form (unused values at their defaults)."""
+    elements, hyst = DRIFT_FORMS[form]
+    d = Drift()
+    tau1s = TAU1_GRID_S if elements >= 1 else (d.creep_tau_s,)
+    tau2s = TAU2_GRID_S if elements >= 2 else (d.creep2_tau_s,)
+    widths = tuple(w * full_scale for w in WIDTH_GRID_FS) if hyst else (d.hysteresis_width_n,)
+    return [(t1, t2, w) for t1 in tau1s for t2 in tau2s for w in widths if elements < 2 or t2 > 3 * t1]
+
+
+def _fractions(
+    reg: _Regressors, form: str, grid: tuple[float, float, float], x_hat: FloatArray, rows: BoolArray
+) -> tuple[Drift, float]:
+    """The linear least-squares fractions (a1, a2, beta) at one grid point, and the training
+    residual RMS (N) of x_hat - x(F)."""
+    elements, hyst = DRIFT_FORMS[form]
+    tau1, tau2, width = grid
+    cols: list[FloatArray] = []
+    if elements >= 1:
+        cols.append(reg.kelvin(tau1))
+    if elements >= 2:
+        cols.append(reg.kelvin(tau2))
+    if hyst:
+        cols.append(reg.hysteresis(width))
+    y = (x_hat - reg.force)[rows]
+    ok = np.isfinite(y)
+    values = [0.0] * len(cols)
+    if cols and ok.sum() > len(cols):
+        a = np.column_stack([c[rows][ok] for c in cols])
+        values = [float(v) for v in np.nan_to_num(np.linalg.lstsq(a, y[ok], rcond=None)[0])]
+    a1 = float(np.clip(values.pop(0), -0.9, 5.0)) if elements >= 1 else 0.0
+    a2 = float(np.clip(values.pop(0), -0.9, 5.0)) if elements >= 2 else 0.0
+    beta = float(np.clip(values.pop(0), -0.9, 0.9)) if hyst else 0.0
+    # a form's own terms stay on (a fitted zero would make it another form)
+    a1 = a1 if elements < 1 or a1 != 0.0 else 1e-9
+    a2 = a2 if elements < 2 or a2 != 0.0 else 1e-9
+    beta = beta if not hyst or beta != 0.0 else 1e-9
+    drift = Drift(a1, tau1, a2, tau2, beta, width)
+    resid = y - _design(reg, drift)[rows]
+    return drift, rms(resid)
+
+
+def _design(reg: _Regressors, d: Drift) -> FloatArray:
+    """x(F) - F: the drift terms the reference force drives."""
+    out = np.zeros_like(reg.force)
+    if d.creep_fraction:
+        out = out + d.creep_fraction * reg.kelvin(d.creep_tau_s)
+    if d.creep2_fraction:
+        out = out + d.creep2_fraction * reg.kelvin(d.creep2_tau_s)
+    if d.hysteresis_fraction:
+        out = out + d.hysteresis_fraction * reg.hysteresis(d.hysteresis_width_n)
+    return out
+
+
+def fit_candidate(reg: _Regressors, kind: str, form: str) -> CurveChannel:
+    """Fit one curve kind with one drift form to the training rows (module docstring)."""
+    data = reg.data
+    rows = data.train
+    r = data.resistance_ohm
+    curve = fit_curve(kind, np.where(rows, reg.force, np.nan), r)
+    drift = Drift()
+    if form != "static":
+        x_hat = CurveChannel(curve).static_force(r)
+        best = min(
+            (_fractions(reg, form, g, x_hat, rows) for g in _grid(form, reg.full_scale)),
+            key=lambda pair: pair[1] if math.isfinite(pair[1]) else math.inf,
+        )
+        drift = best[0]
+        grid = (drift.creep_tau_s, drift.creep2_tau_s, drift.hysteresis_width_n)
+        for _ in range(ALTERNATIONS):
+            target = reg.force + _design(reg, drift)
+            curve = fit_curve(kind, np.where(rows, target, np.nan), r)
+            x_hat = CurveChannel(curve).static_force(r)
+            drift = _fractions(reg, form, grid, x_hat, rows)[0]
+    return CurveChannel(curve, drift, force_min_n=0.0, force_max_n=reg.full_scale)
+
+
+def hold_drift_pct(
+    time_s: FloatArray, reference_n: FloatArray, force_n: FloatArray, rows: BoolArray, full_scale: float
+) -> float:
+    """RMS over the holds inside ``rows`` of (mean error over the hold's last 10 %) - (over its
+    first 10 %), as % of ``full_scale``; NaN without a hold."""
+    changes = []
+    for h in find_holds(time_s, reference_n):
+        idx = np.arange(h.start, h.stop)
+        if not rows[idx].all():
+            continue
+        n = max(1, idx.size // 10)
+        err = force_n[idx] - reference_n[idx]
+        a, b = float(np.nanmean(err[:n])), float(np.nanmean(err[-n:]))
+        if math.isfinite(a) and math.isfinite(b):
+            changes.append(b - a)
+    if not changes or not full_scale > 0:
+        return math.nan
+    return 100.0 * rms(np.asarray(changes)) / full_scale
+
+
+def score(data: FitData, name: str, channel: CurveChannel, full_scale: float) -> Candidate:
+    """Track the whole record with ``channel`` and score it on the held-out rows."""
+    force, _ = track_series(channel, data.resistance_ohm, data.time_s)
+    err = force - data.force_n
+    return Candidate(
+        name=name,
+        channel=channel,
+        held_out_force_rms_n=rms(err[data.test]),
+        hold_drift_pct_fs=hold_drift_pct(data.time_s, data.force_n, force, data.test, full_scale),
+        train_force_rms_n=rms(err[data.train]),
+        force_n=force,
+    )
+
+
+def rank_candidates(
+    data: FitData,
+    kinds: Sequence[str] = CURVE_KINDS,
+    forms: Sequence[str] | None = None,
+    real_time: bool = True,
+) -> list[Candidate]:
+    """Every curve kind with every drift form (time-driven forms only with real time), fitted
+    and scored; best held-out force RMS first. A candidate that cannot be fitted is left out."""
+    reg = _Regressors(data)
+    chosen = list(forms) if forms is not None else list(DRIFT_FORMS)
+    if not real_time:
+        chosen = [f for f in chosen if DRIFT_FORMS[f][0] == 0]
+    out: list[Candidate] = []
+    for kind in kinds:
+        for form in chosen:
+            try:
+                ch = fit_candidate(reg, kind, form)
+            except (ValueError, np.linalg.LinAlgError):
+                continue
+            out.append(score(data, f"{kind} + {form}", ch, reg.full_scale))
+    return sorted(
+        out, key=lambda c: c.held_out_force_rms_n if math.isfinite(c.held_out_force_rms_n) else math.inf
+    )
