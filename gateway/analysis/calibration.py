@@ -434,7 +434,12 @@ def calibration_toml(
     for cal in items:
         name = rename.get(cal.channel, cal.channel)
         kind = cal.best if model == "auto" else model
-        lines += ["", f'[channel."{name}"]', f"# model: {kind} ({cal.verdict})"]
+        rms = cal.force_rms().get(kind, math.nan)
+        lines += [
+            "",
+            f'[channel."{name}"]',
+            f"# model: {kind}, held-out force RMS {rms:.4g} N ({cal.verdict})",
+        ]
         lines.append(f"# parameters fitted with the {OBJECTIVE_WORDS[cal.fit.objective]} objective")
         for est in cal.fit.estimates:
             if est.name in known:

@@ -23,7 +23,9 @@ from .common import parse_assignments
 
 
 @click.command("calibrate")
-@click.argument("record_path", metavar="RECORD.csv", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument(
+    "record_path", metavar="RECORD.csv", required=False, type=click.Path(dir_okay=False, path_type=Path)
+)
 @click.option("--channel", "channel_names", multiple=True, help="channel to calibrate (default: all)")
 @click.option("--effects", default="tunneling,contact,creep", show_default=True, help="model effects")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE", help="prior value of a parameter")
@@ -65,6 +67,27 @@ from .common import parse_assignments
 @click.option(
     "--plots", "plot_dir", type=click.Path(file_okay=False, path_type=Path), help="write PNGs to DIR"
 )
+@click.option(
+    "--update",
+    "update_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    metavar="CAL.toml",
+    help="re-fit only the sensitivity (gain and offset) of CAL's [curve] tables from RECORD.csv or from "
+    "--known loads, keeping each curve's shape and dynamics; writes CAL (or --out)",
+)
+@click.option(
+    "--known",
+    "known",
+    multiple=True,
+    metavar="FORCE_N=RESISTANCE_OHM",
+    help="with --update: a known load read at rest (1 to 3; one fits the gain, two or more gain and offset)",
+)
+@click.option(
+    "--first-s",
+    "first_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    help="with --update: use only the record's first S seconds",
+)
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object and nothing else")
 @click.option("--force", "overwrite", is_flag=True, help="replace --out even if it is not a calibration file")
 def calibrate_cmd(
@@ -78,13 +101,28 @@ def calibrate_cmd(
     force_offset: str,
     as_name: str | None,
     plot_dir: Path | None,
+    update_path: Path | None,
+    known: tuple[str, ...],
+    first_s: float | None,
     as_json: bool,
     overwrite: bool,
 ) -> None:
     """Fit R0, the contact coefficient and E0, E1, mu1 (linear in force) to RECORD.csv.
 
     ``--out`` replaces an earlier calibration file, but never another kind of file (a gateway
-    configuration, say) unless ``--force``."""
+    configuration, say) unless ``--force``.
+
+    ``--update CAL.toml`` re-fits the sensitivity of a stored curve calibration from a short
+    RECORD.csv (the first minutes of a new run) or from ``--known`` loads."""
+    if update_path is not None:
+        update_calibration(
+            update_path, record_path, known, first_s, channel_names, as_name, out_path, as_json
+        )
+        return
+    if known or first_s is not None:
+        raise click.UsageError("--known and --first-s go with --update CAL.toml")
+    if record_path is None:
+        raise click.UsageError("missing argument RECORD.csv (the measurement record to calibrate from)")
     if out_path is not None:
         _check_out(out_path, overwrite)
     try:
@@ -154,6 +192,75 @@ def calibrate_cmd(
         click.echo(f"wrote {out_path}")
     for p in written:
         click.echo(f"wrote {p}")
+
+
+def update_calibration(
+    cal_path: Path,
+    record_path: Path | None,
+    known: tuple[str, ...],
+    first_s: float | None,
+    channel_names: tuple[str, ...],
+    as_name: str | None,
+    out_path: Path | None,
+    as_json: bool,
+) -> None:
+    """``calibrate --update``: the sensitivity of CAL's curves from a record or known loads."""
+    from ..analysis.update import (
+        UpdateError,
+        load_curves,
+        update_from_loads,
+        update_from_record,
+        write_updated,
+    )
+
+    if (record_path is None) == (not known):
+        raise click.UsageError(
+            "--update needs either RECORD.csv or --known FORCE_N=RESISTANCE_OHM loads (one of them)"
+        )
+    try:
+        curves = load_curves(cal_path)
+        updates = []
+        if known:
+            loads = list(parse_assignments(known, "--known").items())
+            pairs = []
+            for f, r in loads:
+                try:
+                    pairs.append((float(f), r))
+                except ValueError:
+                    raise click.BadParameter(f"{f!r} is not a force in N", param_hint="--known") from None
+            names = list(channel_names) or ([as_name] if as_name else list(curves))
+            if len(names) != 1 or names[0] not in curves:
+                raise click.UsageError(
+                    "--known loads belong to one channel: name it with --channel "
+                    f"(curves: {', '.join(curves)})"
+                )
+            updates.append(update_from_loads(names[0], curves[names[0]], pairs))
+        else:
+            assert record_path is not None
+            record = read_record(record_path, require_force=True)
+            chosen = list(channel_names) or list(record.channels)
+            for rec_name in chosen:
+                cal_name = as_name if as_name and len(chosen) == 1 else rec_name
+                if cal_name not in curves:
+                    raise click.UsageError(
+                        f'{cal_path} has no [curve."{cal_name}"] table for record channel {rec_name!r} '
+                        f"(curves: {', '.join(curves)}; map one with --as NAME)"
+                    )
+                updates.append(
+                    update_from_record(cal_name, curves[cal_name], record.channel(rec_name), first_s)
+                )
+        target = out_path or cal_path
+        write_updated(cal_path, target, {u.channel: u.after for u in updates})
+    except (UpdateError, RecordError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+    except OSError as exc:
+        raise click.ClickException(f"cannot write {out_path or cal_path}: {exc.strerror or exc}") from None
+    if as_json:
+        click.echo(json.dumps({"updates": [u.as_dict() for u in updates], "written": str(target)}))
+        return
+    for u in updates:
+        click.echo(u.describe())
+    click.echo(f"wrote {target}")
 
 
 def ch_record(record: object, name: str) -> object:
