@@ -12,7 +12,7 @@ Fitting one candidate (the reference force drives the state, as in the physical 
 
 1. the apparent force the curve should read is x = F (1 + beta s) + a1 K1[F] + a2 K2[F]: K_i
    is a Kelvin element of unit fraction driven by the reference force (exact exponential
-   steps, the tracker's convention), s the play's direction before each sample;
+   steps, the tracker's convention), s the direction of the play on the curve's own reading;
 2. the static curve is fitted to (x, R) on the training rows (force-space least squares for
    the power law and the line; pooled adjacent violators for the lookup);
 3. with the curve's x_hat = curve(R), the fractions a1, a2, beta solve the linear least squares
@@ -53,7 +53,7 @@ BoolArray = NDArray[np.bool_]
 
 TAU1_GRID_S = (1.0, 3.0, 10.0, 30.0)
 TAU2_GRID_S = (100.0, 300.0, 1000.0)
-WIDTH_GRID_FS = (0.02, 0.06, 0.15)  # play width as a share of the record's full scale
+WIDTH_GRID_FS = (0.01, 0.03, 0.08, 0.2)  # play width as a share of the record's full scale
 ALTERNATIONS = 3
 
 
@@ -110,16 +110,16 @@ def kelvin_response(held_n: FloatArray, dt_s: FloatArray, tau_s: float) -> Float
     return out
 
 
-def play_direction(force_n: FloatArray, width_n: float) -> FloatArray:
-    """s before each sample: the play p <- clip(p, F - w, F + w) of the previous samples,
-    s = clip((p - F_prev) / w, -1, 1), 0 before the first (the tracker's convention)."""
-    out = [0.0] * force_n.size
-    p = held = 0.0
-    for k, f in enumerate(force_n.tolist()):
-        s = (p - held) / width_n
-        out[k] = -1.0 if s < -1.0 else 1.0 if s > 1.0 else s
-        held = f
-        p = f - width_n if p < f - width_n else f + width_n if p > f + width_n else p
+def play_direction(reading_n: FloatArray, width_n: float) -> FloatArray:
+    """s at each sample: the play p <- clip(p, x - w, x + w) moved by the reading x (from
+    p = 0; a NaN reading leaves it), s = (p - x) / w in [-1, 1] (the tracker's convention)."""
+    out = [0.0] * reading_n.size
+    p = 0.0
+    for k, x in enumerate(reading_n.tolist()):
+        if x != x:
+            continue
+        p = x - width_n if p < x - width_n else x + width_n if p > x + width_n else p
+        out[k] = (p - x) / width_n
     return np.asarray(out)
 
 
@@ -173,6 +173,12 @@ class _Regressors:
         self.full_scale = float(np.max(f[usable])) if usable.any() else 1.0
         self._k: dict[float, FloatArray] = {}
         self._s: dict[float, FloatArray] = {}
+        self.reading = self.force  # the curve's reading x the play follows (set per curve)
+
+    def read_with(self, x_hat: FloatArray) -> None:
+        """Drive the hysteresis regressors by this curve's reading."""
+        self.reading = x_hat
+        self._s.clear()
 
     def kelvin(self, tau_s: float) -> FloatArray:
         if tau_s not in self._k:
@@ -181,17 +187,33 @@ class _Regressors:
 
     def hysteresis(self, width_n: float) -> FloatArray:
         if width_n not in self._s:
-            self._s[width_n] = self.force * play_direction(np.maximum(self.force, 0.0), width_n)
+            self._s[width_n] = self.force * play_direction(self.reading, width_n)
         return self._s[width_n]
 
 
-def _grid(form: str, full_scale: float) -> list[tuple[float, float, float]]:
+def reading_noise_n(x_hat: FloatArray, force_n: FloatArray, rows: BoolArray) -> float:
+    """The noise of the curve's reading at its loudest (N): the 90th percentile of the change
+    of x_hat - F between consecutive rows, as a Gaussian sigma (/ (1.645 sqrt 2))."""
+    d = np.diff(np.where(rows, x_hat - force_n, np.nan))
+    d = np.abs(d[np.isfinite(d)])
+    return float(np.quantile(d, 0.9)) / (1.645 * math.sqrt(2.0)) if d.size >= 10 else 0.0
+
+
+#: The play must be this many reading-noise sigmas wide: a narrower one turns between its
+#: branches on noise, and the force jumps by 2 beta F each time.
+PLAY_NOISE_SIGMAS = 4.0
+
+
+def _grid(form: str, full_scale: float, noise_n: float = 0.0) -> list[tuple[float, float, float]]:
     """(tau1, tau2, width) triples to try for a drift form (unused values at their defaults)."""
     elements, hyst = DRIFT_FORMS[form]
     d = Drift()
     tau1s = TAU1_GRID_S if elements >= 1 else (d.creep_tau_s,)
     tau2s = TAU2_GRID_S if elements >= 2 else (d.creep2_tau_s,)
-    widths = tuple(w * full_scale for w in WIDTH_GRID_FS) if hyst else (d.hysteresis_width_n,)
+    widths: tuple[float, ...] = (d.hysteresis_width_n,)
+    if hyst:
+        wide = [w * full_scale for w in WIDTH_GRID_FS if w * full_scale >= PLAY_NOISE_SIGMAS * noise_n]
+        widths = tuple(wide) or (max(WIDTH_GRID_FS) * full_scale,)
     return [(t1, t2, w) for t1 in tau1s for t2 in tau2s for w in widths if elements < 2 or t2 > 3 * t1]
 
 
@@ -248,8 +270,12 @@ def fit_candidate(reg: _Regressors, kind: str, form: str) -> CurveChannel:
     drift = Drift()
     if form != "static":
         x_hat = CurveChannel(curve).static_force(r)
+        reg.read_with(x_hat)
         best = min(
-            (_fractions(reg, form, g, x_hat, rows) for g in _grid(form, reg.full_scale)),
+            (
+                _fractions(reg, form, g, x_hat, rows)
+                for g in _grid(form, reg.full_scale, reading_noise_n(x_hat, reg.force, rows))
+            ),
             key=lambda pair: pair[1] if math.isfinite(pair[1]) else math.inf,
         )
         drift = best[0]
@@ -258,6 +284,7 @@ def fit_candidate(reg: _Regressors, kind: str, form: str) -> CurveChannel:
             target = reg.force + _design(reg, drift)
             curve = fit_curve(kind, np.where(rows, target, np.nan), r)
             x_hat = CurveChannel(curve).static_force(r)
+            reg.read_with(x_hat)
             drift = _fractions(reg, form, grid, x_hat, rows)[0]
     return CurveChannel(curve, drift, force_min_n=0.0, force_max_n=reg.full_scale)
 

@@ -16,23 +16,24 @@ A channel read through a *curve* separates the sensor's static curve from its dy
   a few known loads refits only these two (``calibrate --update``).
 * the dynamics (``Drift``) move the apparent force away from the applied force F:
 
-  x_k = F_k (1 + beta s_{k-1}) + z1_k + z2_k,
+  x_k = F_k (1 + beta s_k) + z1_k + z2_k,
 
   - z_i, a Kelvin element of the creep chain: over an interval dt with the previous force
     F_{k-1} held, z_i <- e z_i + (1 - e) a_i F_{k-1}, e = exp(-dt / tau_i). Under a held load
     z_i rises to a_i F with time constant tau_i (the reading creeps up); after unloading it
     decays with the same tau_i (recovery: a low load after a high one reads high at first).
     One element (``creep``) or two (``creep2``, a slower one);
-  - s, rate-independent hysteresis: a play operator p of width w (N) on the force,
-    p <- clip(p, F - w, F + w), and s = (p - F) / w in [-1, 1]: -1 while loading, +1 while
+  - s, rate-independent hysteresis: a play operator p of width w (N) on the apparent force,
+    p <- clip(p, x - w, x + w), and s = (p - x) / w in [-1, 1]: -1 while loading, +1 while
     unloading, so loading reads (1 - beta) F and unloading (1 + beta) F at the same force.
-    It uses the play of the previous sample (the state before this one), like the physical
-    model's hysteresis.
+    The play follows the reading x, not the estimated force: a play on the estimate would
+    feed back (a dip in F turns s towards unloading, which lowers F further) and, with
+    beta F > w, flip between branches on noise.
 
 Tracking inverts that exactly, sample by sample: relax the Kelvin elements over dt with the
-previous force held, F_k = (x_k - z1 - z2) / (1 + beta s_{k-1}), then record F_k (it becomes
-the held force and moves the play). The same convention as ``SensorModel.track``, so a
-record and the live runtime give the same forces. With no dynamics the force is x.
+previous force held, move the play with x_k, F_k = (x_k - z1 - z2) / (1 + beta s_k), then
+record F_k as the held force. The Kelvin convention is ``SensorModel.track``'s, so a record
+and the live runtime give the same forces. With no dynamics the force is x.
 
 Forces outside the calibrated range [force_min_n, force_max_n] are still read (extrapolated
 along the curve) and flagged ``extrapolated``; a force at or below 0 N reads 0 N no contact;
@@ -442,10 +443,12 @@ class CurveSet:
             e2 = np.exp(-dt / self.tau2)
             z1 = e1 * state.z1 + (1.0 - e1) * self.a1 * held
             z2 = e2 * state.z2 + (1.0 - e2) * self.a2 * held
-            s = np.clip((state.play_n - held) / self.width, -1.0, 1.0)
+            reading = ~np.isnan(x)
+            play = np.where(reading, np.clip(state.play_n, x - self.width, x + self.width), state.play_n)
+            s = np.clip((play - x) / self.width, -1.0, 1.0)
             f = (x - z1 - z2) / (1.0 + self.beta * s)
         else:
-            z1, z2, f = state.z1, state.z2, x
+            z1, z2, play, f = state.z1, state.z2, state.play_n, x
         invalid = np.isnan(f)
         no_contact = ~invalid & (f <= 0.0)
         status = np.where(invalid, _INVALID, np.where(no_contact, _NO_CONTACT, _OK)).astype(np.int8)
@@ -453,10 +456,6 @@ class CurveSet:
         with np.errstate(invalid="ignore"):
             extrapolated = ~invalid & ~no_contact & ((force < self.low) | (force > self.high))
         new_held = np.where(invalid, held, force)
-        if self.dynamic:
-            play = np.clip(state.play_n, new_held - self.width, new_held + self.width)
-        else:
-            play = state.play_n
         return force, status, x, extrapolated, CurveState(z1, z2, play, new_held)
 
 
@@ -481,17 +480,16 @@ def track_series(
     for k, xk in enumerate(x.tolist()):
         z1 = e1[k] * z1 + (1.0 - e1[k]) * a1 * held
         z2 = e2[k] * z2 + (1.0 - e2[k]) * a2 * held
-        s = (play - held) / w
-        s = -1.0 if s < -1.0 else 1.0 if s > 1.0 else s
-        f = (xk - z1 - z2) / (1.0 + beta * s)
-        if f != f:  # NaN: invalid, the held force stays
-            out[k] = f
+        if xk != xk:  # NaN: invalid, the held force and the play stay
+            out[k] = xk
             continue
+        play = xk - w if play < xk - w else xk + w if play > xk + w else play
+        s = (play - xk) / w
+        f = (xk - z1 - z2) / (1.0 + beta * (-1.0 if s < -1.0 else 1.0 if s > 1.0 else s))
         if f <= 0.0:
             f = 0.0
         out[k] = f
         held = f
-        play = f - w if play < f - w else f + w if play > f + w else play
     return np.asarray(out, dtype=np.float64), x
 
 
