@@ -42,6 +42,7 @@ from ..model.curves import (
     LookupCurve,
     PowerLawCurve,
     StaticCurve,
+    preisach_direction,
     track_series,
 )
 from .fitting import FitData
@@ -51,9 +52,9 @@ from .rivals import LOOKUP_KNOTS, MonotoneLookup
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-TAU1_GRID_S = (1.0, 3.0, 10.0, 30.0)
-TAU2_GRID_S = (100.0, 300.0, 1000.0)
-WIDTH_GRID_FS = (0.01, 0.03, 0.08, 0.2)  # play width as a share of the record's full scale
+TAU1_GRID_S = (1.0, 2.0, 5.0, 10.0, 20.0)
+TAU2_GRID_S = (30.0, 60.0, 120.0, 300.0, 1000.0)
+WIDTH_GRID_FS = (0.02, 0.05, 0.1, 0.2)  # play width as a share of the record's full scale
 ALTERNATIONS = 3
 
 
@@ -108,19 +109,6 @@ def kelvin_response(held_n: FloatArray, dt_s: FloatArray, tau_s: float) -> Float
         z = float(out[end - 1])
         start = end
     return out
-
-
-def play_direction(reading_n: FloatArray, width_n: float) -> FloatArray:
-    """s at each sample: the play p <- clip(p, x - w, x + w) moved by the reading x (from
-    p = 0; a NaN reading leaves it), s = (p - x) / w in [-1, 1] (the tracker's convention)."""
-    out = [0.0] * reading_n.size
-    p = 0.0
-    for k, x in enumerate(reading_n.tolist()):
-        if x != x:
-            continue
-        p = x - width_n if p < x - width_n else x + width_n if p > x + width_n else p
-        out[k] = (p - x) / width_n
-    return np.asarray(out)
 
 
 def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> StaticCurve:
@@ -187,7 +175,7 @@ class _Regressors:
 
     def hysteresis(self, width_n: float) -> FloatArray:
         if width_n not in self._s:
-            self._s[width_n] = self.force * play_direction(self.reading, width_n)
+            self._s[width_n] = self.force * preisach_direction(self.reading, width_n)
         return self._s[width_n]
 
 
@@ -214,7 +202,7 @@ def _grid(form: str, full_scale: float, noise_n: float = 0.0) -> list[tuple[floa
     if hyst:
         wide = [w * full_scale for w in WIDTH_GRID_FS if w * full_scale >= PLAY_NOISE_SIGMAS * noise_n]
         widths = tuple(wide) or (max(WIDTH_GRID_FS) * full_scale,)
-    return [(t1, t2, w) for t1 in tau1s for t2 in tau2s for w in widths if elements < 2 or t2 > 3 * t1]
+    return [(t1, t2, w) for t1 in tau1s for t2 in tau2s for w in widths if elements < 2 or t2 >= 3 * t1]
 
 
 def _fractions(

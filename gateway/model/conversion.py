@@ -4,15 +4,22 @@
 model loses on held-out force, a ``[line.<name>]`` or ``[lookup.<name>]`` table
 (``docs/calibration.md``). A channel with one reads force without the physical model:
 
-* ``LineConversion``: the conductance line C = m F + n, so F = (1/R - n) / m;
+* ``LineConversion``: the conductance line C = m F + n, so F = (1/R - n) / m, calibrated over
+  [force_min_n, force_max_n];
 * ``LookupConversion``: F by linear interpolation in ln R between knots (resistance strictly
-  increasing, force non-increasing), flat beyond the ends.
+  increasing, force non-increasing), calibrated over the knots' forces.
 
-Both are stateless (no creep state: the static estimate equals the force) and share the
-inversion's statuses: a force at or below the lower bound (or at or below 0 N) reads 0 N
-``NO_CONTACT``, at or above the upper bound ``SATURATED`` with the bound, a NaN, zero or
-negative resistance ``INVALID``. ``ConversionSet`` evaluates every converted channel of a
-device at once, each kind vectorised over its channels.
+Both are stateless (no creep state: the static estimate equals the force). Beyond the
+calibrated range a channel still reads a force, extrapolated along its calibration (the line
+along itself; the lookup along its end segments in ln R) and flagged ``EXTRAPOLATED``: a
+calibration is not a blindfold. A force at or below 0 N, and an open sensor, read 0 N
+``NO_CONTACT``; so does a line with n < 0 below its ``force_min_n`` (below its zero-conductance
+force -n/m a sensor at rest would read a phantom force; see ``LineConversion``). A NaN, zero
+or negative resistance is ``INVALID``; the smallest resistance the runtime passes for a short
+rail read as a reading (a device with fault bitmaps, ``_SHORT_RAIL_OHM``) is ``SATURATED``
+with the calibrated upper bound, as no extrapolation means anything there.
+``ConversionSet`` evaluates every converted channel of a device at once, each kind
+vectorised over its channels.
 """
 
 from __future__ import annotations
@@ -47,11 +54,20 @@ CONVERSION_KINDS = ("line", "lookup", "curve")
 _LINE_KEYS = ("slope_s_per_n", "intercept_s", "force_min_n", "force_max_n", "held_out_force_rms_n")
 _LOOKUP_KEYS = ("resistance_ohm", "force_n", "held_out_force_rms_n")
 
-# status by 4 * invalid + 2 * (F <= lower) + (F >= upper); as the inversion's
-_OK, _NO_CONTACT, _SATURATED, _INVALID = (int(s) for s in ForceStatus)
-_STATUS_BY_CODE = np.array(
-    [_OK, _SATURATED, _NO_CONTACT, _NO_CONTACT, _INVALID, _INVALID, _INVALID, _INVALID], dtype=np.int8
+_OK, _NO_CONTACT, _SATURATED, _INVALID, _EXTRAPOLATED = (
+    int(ForceStatus.OK),
+    int(ForceStatus.NO_CONTACT),
+    int(ForceStatus.SATURATED),
+    int(ForceStatus.INVALID),
+    int(ForceStatus.EXTRAPOLATED),
 )
+#: A force at or below this reads 0 N no contact: the unloaded-baseline correction puts a
+#: channel at rest at 0 N only up to rounding (about 1e-17 N), never a nanonewton.
+ZERO_FORCE_N = 1e-9
+#: The runtime's reading of a short rail when the device's fault bitmaps say the channel is
+#: not shorted (``runtime.status_tables._TINY_OHM``): less resistance than the converter
+#: resolves, so saturated, not a force extrapolated to 1e300 N.
+_SHORT_RAIL_OHM = float(np.finfo(np.float64).tiny)
 
 
 class ConversionError(ValueError):
@@ -71,11 +87,14 @@ def _finite(key: str, value: object, unit: str) -> float:
 
 @dataclass(frozen=True)
 class LineConversion:
-    """F = (1/R - n) / m over [force_min_n, force_max_n] (m in S/N, n in S, forces in N).
+    """F = (1/R - n) / m, calibrated over [force_min_n, force_max_n] (m in S/N, n in S,
+    forces in N); beyond the range the line reads along itself, flagged extrapolated.
 
-    With n < 0 the line's conductance is zero at F = -n/m: a sensor at rest would read that
-    force, so ``force_min_n`` must lie above it (an open or nearly open sensor then reads
-    0 N ``NO_CONTACT``)."""
+    With n < 0 the line's conductance is zero at F = -n/m: an open sensor (0 S) or a nearly
+    open one would read about -n/m newtons, a phantom force at rest. So ``force_min_n`` must
+    lie above -n/m, and below ``force_min_n`` such a line reads 0 N ``NO_CONTACT`` instead of
+    extrapolating down (with n >= 0 the line extrapolates down to 0 N, where a sensor at rest
+    lies: conductance n or less)."""
 
     slope_s_per_n: float
     intercept_s: float
@@ -116,7 +135,8 @@ class LineConversion:
 
 @dataclass(frozen=True)
 class LookupConversion:
-    """F against ln R through the knots ``(resistance_ohm[i], force_n[i])``, flat beyond the ends."""
+    """F against ln R through the knots ``(resistance_ohm[i], force_n[i])``; beyond the ends
+    along the end segments (``ConversionSet``), flagged extrapolated."""
 
     resistance_ohm: tuple[float, ...]
     force_n: tuple[float, ...]
@@ -218,14 +238,13 @@ class ConversionSet:
         self.intercept = np.array([c.intercept_s for _, c in lines], dtype=np.float64)
         self.line_low = np.array([c.force_min_n for _, c in lines], dtype=np.float64)
         self.line_high = np.array([c.force_max_n for _, c in lines], dtype=np.float64)
-        # the resistances at the bounds, compared as the inversion compares R with R(force_min/max)
-        with np.errstate(divide="ignore"):
-            self.line_r_low = np.where(
-                self.slope * self.line_low + self.intercept > 0.0,
-                1.0 / (self.slope * self.line_low + self.intercept),
-                np.inf,
-            )
-            self.line_r_high = 1.0 / (self.slope * self.line_high + self.intercept)
+        # the resistances at the bounds: a resistance is compared with them, as the inversion
+        # compares R with R(force_min/max), so that a force at a bound is inside the range
+        # (LineConversion checks that m force_min_n + n > 0)
+        self.line_r_low = 1.0 / (self.slope * self.line_low + self.intercept)
+        self.line_r_high = 1.0 / (self.slope * self.line_high + self.intercept)
+        #: lines with n < 0 read no contact below their lower bound (no phantom force at rest)
+        self.line_floor = self.intercept < 0.0
         self.lookup_pos = np.array([k for k, _ in lookups], dtype=np.intp)
         # knots padded to the longest table: ln R with +inf, force with the last value
         width = max((len(c.force_n) for _, c in lookups), default=2)
@@ -239,11 +258,31 @@ class ConversionSet:
         rows = np.arange(len(lookups))
         self.lookup_high = self.knot_f[:, 0].copy()
         self.lookup_low = np.maximum(self.knot_f[rows, self.last], 0.0)
+        # the end segments a lookup extends along: at each end, from the end knot to the
+        # nearest knot of another force. A flat end (a bench's holds give bins of equal
+        # median force) extended flat would read the end force at any resistance beyond it,
+        # a phantom force at rest; the sloped segment reaches 0 N where the baseline
+        # correction puts a channel at rest (``unloaded_conductance_s``).
+        low_other = [int(np.flatnonzero(np.asarray(c.force_n) > c.force_n[-1])[-1]) for _, c in lookups]
+        high_other = [int(np.flatnonzero(np.asarray(c.force_n) < c.force_n[0])[0]) for _, c in lookups]
+        self.low_end = self._end_line(rows, self.last, np.array(low_other, dtype=np.intp))
+        self.high_end = self._end_line(
+            rows, np.zeros(len(lookups), dtype=np.intp), np.array(high_other, dtype=np.intp)
+        )
         self.positions = np.concatenate([self.line_pos, self.lookup_pos])
         self.unloaded_ohm = np.array(
             [1.0 / g if g > 0.0 else np.inf for g in (c.unloaded_conductance_s for _, c in lines + lookups)],
             dtype=np.float64,
         )
+
+    def _end_line(
+        self, rows: NDArray[np.intp], end: NDArray[np.intp], other: NDArray[np.intp]
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Per lookup: the end knot's ln R and force, and the slope dF/d(ln R) (< 0) of the
+        segment from it to the knot ``other``."""
+        x0, f0 = self.log_r[rows, end], self.knot_f[rows, end]
+        x1, f1 = self.log_r[rows, other], self.knot_f[rows, other]
+        return x0, f0, (f1 - f0) / (x1 - x0)
 
     def apply(self, resistance_ohm: FloatArray, force_n: FloatArray, status: StatusArray) -> None:
         """Write force (N) and ``ForceStatus`` of the converted channels into the device's arrays."""
@@ -251,35 +290,43 @@ class ConversionSet:
             if self.line_pos.size:
                 r = resistance_ohm[self.line_pos]
                 f = (np.where(np.isinf(r), 0.0, 1.0 / r) - self.intercept) / self.slope
-                force_n[self.line_pos], status[self.line_pos] = self._ends(
-                    f, ~(r > 0.0), r >= self.line_r_low, r <= self.line_r_high, self.line_high
+                force_n[self.line_pos], status[self.line_pos] = self._classify(
+                    f,
+                    r,
+                    (f <= ZERO_FORCE_N) | (self.line_floor & (r >= self.line_r_low)),
+                    (r > self.line_r_low) | (r < self.line_r_high),
+                    self.line_high,
                 )
             if self.lookup_pos.size:
                 r = resistance_ohm[self.lookup_pos]
                 f = self._interpolate(np.log(r))
-                force_n[self.lookup_pos], status[self.lookup_pos] = self._ends(
-                    f, ~(r > 0.0), f <= self.lookup_low, f >= self.lookup_high, self.lookup_high
+                force_n[self.lookup_pos], status[self.lookup_pos] = self._classify(
+                    f, r, f <= ZERO_FORCE_N, (f < self.lookup_low) | (f > self.lookup_high), self.lookup_high
                 )
 
     def _interpolate(self, x: FloatArray) -> FloatArray:
-        """Linear in ln R between each table's knots; flat beyond its ends (NaN stays NaN)."""
+        """Linear in ln R between each table's knots, and beyond its ends along its end
+        segments; an open sensor (ln R = +inf) reads -inf N, a NaN stays NaN."""
         rows = np.arange(x.size)
         above = np.count_nonzero(self.log_r <= x[:, None], axis=1)  # knots at or below x
         j = np.clip(above, 1, self.last)
         x0, x1 = self.log_r[rows, j - 1], self.log_r[rows, j]
         f0, f1 = self.knot_f[rows, j - 1], self.knot_f[rows, j]
         t = np.clip((x - x0) / (x1 - x0), 0.0, 1.0)
-        return np.asarray(f0 * (1.0 - t) + f1 * t)  # exactly a knot's force at t = 0 and 1
+        inside = f0 * (1.0 - t) + f1 * t  # exactly a knot's force at t = 0 and 1
+        (lx, lf, ls), (hx, hf, hs) = self.low_end, self.high_end
+        return np.asarray(np.where(x > lx, lf + ls * (x - lx), np.where(x < hx, hf + hs * (x - hx), inside)))
 
     @staticmethod
-    def _ends(
-        f: FloatArray, invalid: BoolArray, at_low: BoolArray, at_high: BoolArray, high: FloatArray
+    def _classify(
+        f: FloatArray, r: FloatArray, no_contact: BoolArray, outside: BoolArray, high: FloatArray
     ) -> tuple[FloatArray, StatusArray]:
-        """Force and status: 0 N at or below the lower bound, the bound at or above the upper."""
-        code = invalid.view(np.int8) * np.int8(4)
-        code += at_low.view(np.int8) * np.int8(2)
-        code += at_high.view(np.int8)
-        status = _STATUS_BY_CODE[code]
-        out = np.where(status == _OK, f, np.where(status == _SATURATED, high, 0.0))
-        out[invalid] = np.nan
+        """Force (N) and status: NaN ``INVALID`` where the resistance is not > 0, the upper
+        bound ``SATURATED`` at the short rail, 0 N ``NO_CONTACT`` where ``no_contact``, else
+        the force, ``EXTRAPOLATED`` where it lies ``outside`` the calibrated range."""
+        invalid = ~(r > 0.0)
+        short = ~invalid & (r <= _SHORT_RAIL_OHM)
+        code = np.where(no_contact, _NO_CONTACT, np.where(outside, _EXTRAPOLATED, _OK))
+        status = np.where(invalid, _INVALID, np.where(short, _SATURATED, code)).astype(np.int8)
+        out = np.where(invalid, np.nan, np.where(short, high, np.where(no_contact, 0.0, f)))
         return out, status

@@ -23,9 +23,11 @@ A channel read through a *curve* separates the sensor's static curve from its dy
     z_i rises to a_i F with time constant tau_i (the reading creeps up); after unloading it
     decays with the same tau_i (recovery: a low load after a high one reads high at first).
     One element (``creep``) or two (``creep2``, a slower one);
-  - s, rate-independent hysteresis: a play operator p of width w (N) on the apparent force,
-    p <- clip(p, x - w, x + w), and s = (p - x) / w in [-1, 1]: -1 while loading, +1 while
-    unloading, so loading reads (1 - beta) F and unloading (1 + beta) F at the same force.
+  - s, rate-independent hysteresis (Preisach-style): play operators of widths c_j w (N,
+    c_j in ``PLAY_SHARES``) on the apparent force, p_j <- clip(p_j, x - c_j w, x + c_j w), and
+    s = mean_j (p_j - x) / (c_j w) in [-1, 1]: -1 while loading, +1 while unloading, so
+    loading reads (1 - beta) F and unloading (1 + beta) F at the same force; after a small
+    reversal only the narrow plays turn, so s moves gradually, as a Preisach loop does.
     The play follows the reading x, not the estimated force: a play on the estimate would
     feed back (a dip in F turns s towards unloading, which lowers F further) and, with
     beta F > w, flip between branches on noise.
@@ -73,6 +75,8 @@ StatusArray = NDArray[np.int8]
 BoolArray = NDArray[np.bool_]
 
 CURVE_KINDS = ("power_law", "line", "lookup")
+#: The hysteresis plays' widths as shares of ``Drift.hysteresis_width_n``.
+PLAY_SHARES = (0.25, 0.5, 1.0, 2.0)
 #: The dynamics a curve can carry, by name: (creep elements, hysteresis).
 DRIFT_FORMS: dict[str, tuple[int, bool]] = {
     "static": (0, False),
@@ -83,7 +87,12 @@ DRIFT_FORMS: dict[str, tuple[int, bool]] = {
     "creep2+hysteresis": (2, True),
 }
 
-_OK, _NO_CONTACT, _SATURATED, _INVALID = (int(s) for s in ForceStatus)
+_OK, _NO_CONTACT, _SATURATED, _INVALID = (
+    int(ForceStatus.OK),
+    int(ForceStatus.NO_CONTACT),
+    int(ForceStatus.SATURATED),
+    int(ForceStatus.INVALID),
+)
 
 
 class CurveError(ValueError):
@@ -347,12 +356,12 @@ class CurveState:
 
     z1: FloatArray
     z2: FloatArray
-    play_n: FloatArray
+    play_n: FloatArray  # (channels, len(PLAY_SHARES))
     last_force_n: FloatArray
 
     @classmethod
     def zeros(cls, n: int) -> CurveState:
-        return cls(np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
+        return cls(np.zeros(n), np.zeros(n), np.zeros((n, len(PLAY_SHARES))), np.zeros(n))
 
     def select(self, idx: NDArray[np.intp]) -> CurveState:
         return CurveState(self.z1[idx], self.z2[idx], self.play_n[idx], self.last_force_n[idx])
@@ -443,9 +452,10 @@ class CurveSet:
             e2 = np.exp(-dt / self.tau2)
             z1 = e1 * state.z1 + (1.0 - e1) * self.a1 * held
             z2 = e2 * state.z2 + (1.0 - e2) * self.a2 * held
-            reading = ~np.isnan(x)
-            play = np.where(reading, np.clip(state.play_n, x - self.width, x + self.width), state.play_n)
-            s = np.clip((play - x) / self.width, -1.0, 1.0)
+            widths = self.width[:, None] * np.asarray(PLAY_SHARES)[None, :]
+            xs = x[:, None]
+            play = np.where(~np.isnan(xs), np.clip(state.play_n, xs - widths, xs + widths), state.play_n)
+            s = np.mean((play - xs) / widths, axis=1)
             f = (x - z1 - z2) / (1.0 + self.beta * s)
         else:
             z1, z2, play, f = state.z1, state.z2, state.play_n, x
@@ -474,23 +484,41 @@ def track_series(
     dt = np.maximum(np.diff(t, prepend=t[:1]), 0.0)
     e1 = np.exp(-dt / d.creep_tau_s).tolist()
     e2 = np.exp(-dt / d.creep2_tau_s).tolist()
-    a1, a2, beta, w = d.creep_fraction, d.creep2_fraction, d.hysteresis_fraction, d.hysteresis_width_n
+    a1, a2, beta = d.creep_fraction, d.creep2_fraction, d.hysteresis_fraction
+    s = preisach_direction(x, d.hysteresis_width_n).tolist() if d.hysteresis_fraction else [0.0] * x.size
     out = [0.0] * len(e1)
-    z1 = z2 = play = held = 0.0
+    z1 = z2 = held = 0.0
     for k, xk in enumerate(x.tolist()):
         z1 = e1[k] * z1 + (1.0 - e1[k]) * a1 * held
         z2 = e2[k] * z2 + (1.0 - e2[k]) * a2 * held
-        if xk != xk:  # NaN: invalid, the held force and the play stay
+        if xk != xk:  # NaN: invalid, the held force stays
             out[k] = xk
             continue
-        play = xk - w if play < xk - w else xk + w if play > xk + w else play
-        s = (play - xk) / w
-        f = (xk - z1 - z2) / (1.0 + beta * (-1.0 if s < -1.0 else 1.0 if s > 1.0 else s))
+        f = (xk - z1 - z2) / (1.0 + beta * s[k])
         if f <= 0.0:
             f = 0.0
         out[k] = f
         held = f
     return np.asarray(out, dtype=np.float64), x
+
+
+def preisach_direction(reading_n: FloatArray, width_n: float) -> FloatArray:
+    """s at each sample (module docstring): the plays of widths ``PLAY_SHARES`` x ``width_n``
+    moved by the reading x from 0 (a NaN reading leaves them), averaged."""
+    widths = [c * width_n for c in PLAY_SHARES]
+    plays = [0.0] * len(widths)
+    out = [0.0] * reading_n.size
+    for k, x in enumerate(np.asarray(reading_n, dtype=np.float64).tolist()):
+        if x != x:
+            continue
+        total = 0.0
+        for j, w in enumerate(widths):
+            p = plays[j]
+            p = x - w if p < x - w else x + w if p > x + w else p
+            plays[j] = p
+            total += (p - x) / w
+        out[k] = total / len(widths)
+    return np.asarray(out)
 
 
 _CURVE_KEYS: dict[str, tuple[str, ...]] = {
