@@ -8,6 +8,7 @@ Examples::
     tactile-sim run --tls 0.0.0.0:802 --cert server.crt --key server.key
     tactile-sim run --map rawgrid --channels 36 --tcp 127.0.0.1:5022
     tactile-sim scenarios
+    tactile-sim fsr-record fsr.csv --runs 3 --protocol calibration --seed 2
 
 SIGINT and SIGTERM stop the server cleanly (a recording is closed as a valid file).
 """
@@ -35,6 +36,7 @@ from .config import (
     parse_world_effects,
 )
 from .faults import FaultError
+from .fsr_emulator import PROTOCOLS, FsrEmulator, FsrParams, write_record
 from .modbus_server import ServerStartError, SimServer, serve_serial, serve_tcp, serve_tls
 from .record import Recorder, array_metadata
 from .scenarios import Scenario, ScenarioError, builtin_scenarios
@@ -111,6 +113,28 @@ def scenarios_cmd() -> None:
     width = max(len(name) for name in table)
     for name, description in table.items():
         click.echo(f"{name:<{width}}  {description}")
+
+
+@main.command("fsr-record")
+@click.argument("out", type=click.Path(dir_okay=False))
+@click.option("--runs", type=click.IntRange(min=1), default=3, show_default=True, help="Measurement runs.")
+@click.option("--seed", type=click.IntRange(min=0), default=1, show_default=True)
+@click.option("--protocol", type=click.Choice(list(PROTOCOLS)), default="holds", show_default=True)
+@click.option("--wear-per-cycle", type=float, default=0.0, show_default=True, help="Loss of k per loading.")
+@click.option("--rate-gain-s", type=float, default=0.0, show_default=True, help="Rate dependence, s.")
+@click.option("--humidity", type=float, default=0.0, show_default=True, help="Drift amplitude, relative.")
+def fsr_record_cmd(
+    out: str, runs: int, seed: int, protocol: str, wear_per_cycle: float, rate_gain_s: float, humidity: float
+) -> None:
+    """Write a record of an emulated FSR (sim_device.fsr_emulator), not of the paper's model."""
+    try:
+        params = FsrParams(wear_per_cycle=wear_per_cycle, rate_gain_s=rate_gain_s, humidity=humidity)
+        records = FsrEmulator(params, seed).run_many(PROTOCOLS[protocol](), runs)
+        path = write_record(out, records)
+    except (ValueError, OSError) as exc:
+        raise click.ClickException(str(exc)) from None
+    rows = sum(r.n_samples for r in records)
+    click.echo(f"tactile-sim: wrote {path}: {runs} run(s) of protocol {protocol}, {rows} rows, seed {seed}")
 
 
 @main.command("run")

@@ -2,7 +2,11 @@
 
 The physical model (``fitting.fit_channel``, drift-corrected inversion) is fitted with
 residuals weighted by the record's measurement model (``measurement``), over the force range
-the record spans (written to the calibration file as ``force_min_n``/``force_max_n``). When the
+the record spans. That range is written to the calibration file as the channel's calibrated
+range (``calibrated_min_n``/``calibrated_max_n``: the runtime flags a force outside it
+``extrapolated``), and the model's own range (``force_min_n``/``force_max_n``, where it reads
+no contact and saturated) reaches well beyond it (``model_force_range``): the calibrated range
+is not a blindfold. When the
 record has loading and unloading, ``hysteresis`` is tried and kept only if it reads the
 held-out force better. Two objectives are fitted (``objectives``): log-resistance (the
 measurement model's) and force, started from the log-R result; ``objective="auto"`` keeps the
@@ -35,7 +39,13 @@ from .objectives import OFFSET
 from .records import ChannelRecord
 from .rivals import Rivals, line_range_lines, verdict
 
-MODELS = ("physics", "line", "lookup", "auto")
+MODELS = ("physics", "line", "lookup", "curve", "auto")
+#: The physical model's written range reaches light touch: force_min_n = min(calibrated
+#: minimum / ``MODEL_RANGE_BELOW``, ``LIGHT_TOUCH_N``) ...
+MODEL_RANGE_BELOW = 10.0
+LIGHT_TOUCH_N = 0.01
+#: ... and beyond the top: force_max_n = ``MODEL_RANGE_ABOVE`` x the calibrated maximum.
+MODEL_RANGE_ABOVE = 3.0
 OBJECTIVE_CHOICES = ("auto", "log_r", "force")
 OFFSET_CHOICES = ("auto", "fit", "none")
 OBJECTIVE_WORDS = {"log_r": "log-R", "force": "force"}
@@ -175,6 +185,7 @@ class Calibration:
                 "floor_force_n": self.noise_floor_force_n,
             },
             "force_range_n": list(self.force_range_n),
+            "model_force_range_n": list(model_force_range(self.force_range_n)),
             "configured_force_range_n": list(self.configured_range_n),
             "rows_outside_configured_range": self.rows_outside_configured,
             "notes": list(self.notes),
@@ -195,6 +206,14 @@ class Calibration:
                 "held_out": self.fit_before.gap_test.as_dict(),
             }
         return out
+
+
+def model_force_range(calibrated_n: tuple[float, float]) -> tuple[float, float]:
+    """The physical model's ``force_min_n``/``force_max_n`` written for a channel calibrated
+    over ``calibrated_n`` (N): from light touch (min(low / 10, 0.01 N)) to 3 x the top. Between
+    them and the calibrated range the model reads forces flagged ``extrapolated``."""
+    low, high = calibrated_n
+    return min(low / MODEL_RANGE_BELOW, LIGHT_TOUCH_N), MODEL_RANGE_ABOVE * high
 
 
 def has_both_directions(data: FitData, share: float = 0.1) -> bool:
@@ -425,7 +444,7 @@ def calibration_toml(
         lines += ["", "[meta]", f'record = "{items[0].record}"', f"effects = [{effects}]"]
         lines += [
             f"# reference zero offset fitted: {c.offset_words()} ({rename.get(c.channel, c.channel)}: "
-            "its force_min_n/force_max_n are the record's range + offset)"
+            "its calibrated_min_n/calibrated_max_n are the record's range + offset)"
             for c in items
             if c.offset_words()
         ]
@@ -434,6 +453,10 @@ def calibration_toml(
     for cal in items:
         name = rename.get(cal.channel, cal.channel)
         kind = cal.best if model == "auto" else model
+        if model == "curve":  # the best static curve with drift correction, whatever else ranks first
+            if not cal.candidates:
+                raise ValueError(f"channel {cal.channel!r}: no curve could be fitted to the record")
+            kind = cal.candidates[0].name
         rms = cal.force_rms().get(kind, math.nan)
         lines += [
             "",
@@ -446,8 +469,14 @@ def calibration_toml(
                 lines.append(f"{est.name} = {_toml_float(est.value)}")
         # a rival reads F_ref, so its channel keeps the record's own range
         low, high = cal.force_range_n if kind == "physics" else cal.record_range_n
-        lines.append(f"force_min_n = {_toml_float(low)}")
-        lines.append(f"force_max_n = {_toml_float(high)}")
+        # the physical model reads beyond the calibrated range (flagged extrapolated there);
+        # a rival's own range is the calibrated one, and it reads beyond it along itself
+        model_low, model_high = model_force_range((low, high)) if kind == "physics" else (low, high)
+        lines.append(f"force_min_n = {_toml_float(model_low)}")
+        lines.append(f"force_max_n = {_toml_float(model_high)}")
+        lines.append(f"# calibrated on {low:.4g}-{high:.4g} N: outside it forces read flagged extrapolated")
+        lines.append(f"calibrated_min_n = {_toml_float(low)}")
+        lines.append(f"calibrated_max_n = {_toml_float(high)}")
         if kind == "line":
             rivals += [
                 "",
@@ -509,9 +538,9 @@ def format_report(cal: Calibration) -> str:
     out.append(f"rows: {fit.n_train} training, {fit.n_test} held out, unusable {cal.unusable}")
     lo, hi = cal.force_range_n
     out.append(
-        f"force range fitted and written: {lo:.3g}-{hi:.4g} N (configured {cal.configured_range_n[0]:g}-"
-        f"{cal.configured_range_n[1]:g} N; {cal.rows_outside_configured} rows outside it, none capped in "
-        "the fit-quality numbers)"
+        f"force range calibrated: {lo:.3g}-{hi:.4g} N, written as calibrated_min_n/calibrated_max_n "
+        f"(configured {cal.configured_range_n[0]:g}-{cal.configured_range_n[1]:g} N; "
+        f"{cal.rows_outside_configured} rows outside it, none capped in the fit-quality numbers)"
         + (
             f"; the record's {cal.record_range_n[0]:.3g}-{cal.record_range_n[1]:.4g} N "
             f"+ the zero offset {cal.offset_words()}"
@@ -519,6 +548,7 @@ def format_report(cal: Calibration) -> str:
             else ""
         )
     )
+    out.append(outside_range_words(cal))
     out.append(
         f"fit objective: {OBJECTIVE_WORDS[fit.objective]} (requested: {cal.objective_mode}; zero offset: "
         f"{cal.offset_mode}); held-out force errors are against "
@@ -570,6 +600,25 @@ def format_report(cal: Calibration) -> str:
         how = f"--model {cal.best} or --model auto" if cal.best in MODELS else "--model auto"
         out.append(f"  (write it as the channel's model with {how})")
     return "\n".join(out)
+
+
+def outside_range_words(cal: Calibration) -> str:
+    """What the channel reads outside its calibrated range (a line of the report)."""
+    lo, hi = cal.force_range_n
+    model_lo, model_hi = model_force_range(cal.force_range_n)
+    rival = ""
+    if cal.offset_words():
+        rival = (
+            f" (a channel written as a line, lookup or curve: outside the record's "
+            f"{cal.record_range_n[0]:.3g}-{cal.record_range_n[1]:.4g} N)"
+        )
+    return (
+        f"outside the calibrated range: below {lo:.3g} N and above {hi:.4g} N the channel reads forces "
+        f"extrapolated along its curve, flagged `extrapolated`{rival}; at or below 0 N it reads no_contact "
+        f"(the physical model is written over {model_lo:.3g}-{model_hi:.4g} N: no_contact below "
+        f"{model_lo:.3g} N, saturated above {model_hi:.4g} N; a line with n < 0 reads no_contact below "
+        "its force_min_n)"
+    )
 
 
 def ranking_lines(cal: Calibration) -> list[str]:

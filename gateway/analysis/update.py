@@ -102,7 +102,7 @@ def load_curves(path: Path) -> dict[str, CurveChannel]:
     if not isinstance(tables, dict) or not tables:
         raise UpdateError(
             f"{path} has no [curve.<name>] table: --update re-fits the sensitivity of a curve calibration "
-            "(write one with `calibrate --model auto` or --model curve kinds)"
+            "(write one with `calibrate --model curve`, or `--model auto` where a curve ranks first)"
         )
     out: dict[str, CurveChannel] = {}
     for name, body in tables.items():

@@ -36,7 +36,7 @@ from .common import parse_assignments
     default="physics",
     show_default=True,
     help="the channel's model to write: the physical model, the conductance line, a monotone lookup, "
-    "or auto (whichever reads held-out force best)",
+    "curve (the best static curve with drift correction), or auto (whichever reads held-out force best)",
 )
 @click.option(
     "--objective",
