@@ -75,9 +75,10 @@ def find_holds(
     tolerance_n: float | None = None,
     min_duration_s: float = MIN_HOLD_S,
 ) -> tuple[Hold, ...]:
-    """The holds of a reference force series (see the module docstring), in time order.
+    """The holds of a reference force series (see the module docstring), in row order.
 
-    ``time_s`` is non-decreasing (s); ``tolerance_n`` defaults to ``hold_tolerance_n(force_n)``.
+    ``time_s`` in s (a step back in time ends a run, as between two records put end to end);
+    ``tolerance_n`` defaults to ``hold_tolerance_n(force_n)``.
     """
     t = np.asarray(time_s, dtype=np.float64)
     f = np.asarray(force_n, dtype=np.float64)
@@ -88,8 +89,6 @@ def find_holds(
         raise ValueError(f"tolerance_n must be a finite number >= 0, got {tolerance_n!r}")
     if not (math.isfinite(min_duration_s) and min_duration_s >= 0.0):
         raise ValueError(f"min_duration_s must be a finite number >= 0, got {min_duration_s!r}")
-    if t.size > 1 and bool(np.any(np.diff(t) < 0.0)):
-        raise ValueError("time_s must be non-decreasing")
     forces, times = f.tolist(), t.tolist()
     n, span = len(forces), 2.0 * tol
     holds: list[Hold] = []
@@ -104,7 +103,7 @@ def find_holds(
             low.popleft()
         while j < n:
             x = forces[j]
-            if not math.isfinite(x):
+            if not math.isfinite(x) or (j > i and times[j] < times[j - 1]):
                 break
             top = max(forces[high[0]], x) if high else x
             bottom = min(forces[low[0]], x) if low else x

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from . import _threads  # noqa: F401  (before numpy loads: see the module)
+from .apply_cmd import apply_cmd
 from .calibrate_cmd import calibrate_cmd
 from .config_cmd import channels, check_config
 from .discrepancy_cmd import discrepancy_cmd
@@ -35,5 +36,6 @@ main.add_command(paper)
 main.add_command(tare)
 main.add_command(scan)
 main.add_command(subscribe)
+main.add_command(apply_cmd)
 
 __all__ = ["main"]

@@ -82,20 +82,41 @@ def test_line_reads_the_hand_value() -> None:
     assert force[0] == pytest.approx(3.000, abs=1e-9)
 
 
-def test_line_bounds_and_beyond_them_say_so() -> None:
+def test_line_beyond_its_range_reads_along_itself_flagged_extrapolated() -> None:
     rs = [
-        _r_line(0.05),  # at the lower bound: no contact, as the physical model
+        _r_line(0.05),  # at the lower bound: inside the calibrated range
         _r_line(0.0501),  # just inside
-        _r_line(0.0),  # below it
+        _r_line(0.01),  # below it: read along the line, flagged
+        _r_line(0.0),  # the line's 0 N: no contact
         _r_line(-0.04),  # the line's negative forces: conductance below its intercept
         1e12,  # far below (nearly open)
+        math.inf,  # open at rest (with fault bitmaps the open rail is a reading)
         _r_line(9.999),
         _r_line(10.0),  # at the upper bound
-        _r_line(25.0),  # beyond it: the bound, and the status says so
+        _r_line(25.0),  # beyond it: read along the line, never clipped, and the status says so
     ]
-    force, status = _read([LINE] * len(rs), rs)
-    assert status == ["no_contact"] * 1 + ["ok"] + ["no_contact"] * 3 + ["ok", "saturated", "saturated"]
-    np.testing.assert_allclose(force, [0.0, 0.0501, 0.0, 0.0, 0.0, 9.999, 10.0, 10.0], rtol=1e-9, atol=0)
+    conv = ConversionSet([LINE] * len(rs))
+    force, status = np.zeros(len(rs)), np.zeros(len(rs), dtype=np.int8)
+    conv.apply(np.array(rs), force, status)
+    labels = [ForceStatus(s).name.lower() for s in status]
+    assert labels == ["ok", "ok", "extrapolated"] + ["no_contact"] * 4 + ["ok", "ok", "extrapolated"]
+    np.testing.assert_allclose(
+        force, [0.05, 0.0501, 0.01, 0.0, 0.0, 0.0, 0.0, 9.999, 10.0, 25.0], rtol=1e-9, atol=0
+    )
+    # through the processor: the same, as channel statuses
+    force, labels = _read([LINE] * 4, [_r_line(0.01), _r_line(3.0), _r_line(25.0), 1e12])
+    assert labels == ["extrapolated", "ok", "extrapolated", "no_contact"]
+    np.testing.assert_allclose(force, [0.01, 3.0, 25.0, 0.0], rtol=1e-9)
+
+
+def test_a_short_rail_read_as_a_reading_is_saturated_not_extrapolated_to_1e300_n() -> None:
+    """With fault bitmaps a 0 ohm reading that is not flagged short reaches the conversion as
+    the smallest normal float: less than the converter resolves, so saturated at the bound."""
+    tiny = float(np.finfo(np.float64).tiny)
+    force, status = np.zeros(2), np.zeros(2, dtype=np.int8)
+    ConversionSet([LINE, LOOKUP]).apply(np.array([tiny, tiny]), force, status)
+    assert status.tolist() == [ForceStatus.SATURATED] * 2
+    np.testing.assert_array_equal(force, [10.0, 8.0])
 
 
 def test_garbage_resistances_are_errors_not_forces() -> None:
@@ -113,12 +134,39 @@ def test_garbage_resistances_are_errors_not_forces() -> None:
 
 def test_lookup_three_points_by_hand() -> None:
     # ln R midway between 1e3 and 1e4 -> midway between 8 N and 2 N; a quarter of the way
-    # from 1e4 to 1e5 -> 2 - 0.25 * 1.5 N
-    rs = [math.sqrt(1e3 * 1e4), 1e4, 1e4 * 10**0.25, 1e3, 500.0, 1e5, 1e6, 1e5 * 0.999]
+    # from 1e4 to 1e5 -> 2 - 0.25 * 1.5 N; the knots' forces (8 N, 0.5 N) are inside the range
+    rs = [math.sqrt(1e3 * 1e4), 1e4, 1e4 * 10**0.25, 1e3, 1e5, 1e5 * 0.999]
     force, status = _read([LOOKUP] * len(rs), rs)
-    assert status == ["ok", "ok", "ok", "saturated", "saturated", "no_contact", "no_contact", "ok"]
+    assert status == ["ok"] * 6
     tail = 0.5 + 1.5 * (np.log(1e5) - np.log(1e5 * 0.999)) / np.log(10.0)
-    np.testing.assert_allclose(force, [5.0, 2.0, 1.625, 8.0, 8.0, 0.0, 0.0, tail], rtol=1e-12)
+    np.testing.assert_allclose(force, [5.0, 2.0, 1.625, 8.0, 0.5, tail], rtol=1e-12)
+
+
+def test_lookup_beyond_its_knots_reads_along_its_end_segments_flagged_extrapolated() -> None:
+    # before the first knot along the first segment (-6 N per decade of R), beyond the last
+    # along the last (-1.5 N per decade) down to 0 N at 1e5 * 10^(1/3) ohm, then no contact
+    rs = [500.0, 100.0, 1e5 * 10 ** (1 / 6), 1e5 * 10 ** (1 / 3) * 1.01, 1e6, math.inf]
+    force, status = _read([LOOKUP] * len(rs), rs)
+    assert status == ["extrapolated", "extrapolated", "extrapolated", "no_contact", "no_contact", "open"]
+    expected = [8.0 + 6.0 * math.log10(2.0), 14.0, 0.25, 0.0, 0.0, math.nan]
+    np.testing.assert_allclose(force, expected, rtol=1e-12)
+    raw_force, raw_status = np.zeros(1), np.zeros(1, dtype=np.int8)
+    ConversionSet([LOOKUP]).apply(np.array([math.inf]), raw_force, raw_status)  # open as a reading
+    assert raw_status[0] == ForceStatus.NO_CONTACT and raw_force[0] == 0.0
+
+
+def test_a_lookup_with_flat_ends_extends_along_its_sloped_end_segments() -> None:
+    """A bench's holds give bins of equal median force: a flat end extended flat would read
+    its force at any resistance beyond it (a phantom force at rest). The lookup extends along
+    the segment to the nearest knot of another force, as its unloaded conductance does."""
+    flat = LookupConversion((1e3, 2e3, 1e4, 1e5, 2e5), (8.0, 8.0, 2.0, 0.5, 0.5))
+    rs = [500.0, 2e5 * 10 ** (1 / 6), 1e7, 1.0 / flat.unloaded_conductance_s]
+    force, status = _read([flat] * len(rs), rs)
+    assert status == ["extrapolated", "extrapolated", "no_contact", "no_contact"]
+    # first sloped segment: 1e3..1e4 (8 -> 2 N), last: 1e4..2e5 (2 -> 0.5 N)
+    up = 8.0 + 6.0 * math.log(2.0) / math.log(10.0)
+    down = 0.5 - 1.5 * (math.log(10 ** (1 / 6))) / math.log(20.0)
+    np.testing.assert_allclose(force, [up, down, 0.0, 0.0], rtol=1e-12)
 
 
 def test_lookups_of_different_lengths_and_lines_in_one_device() -> None:
@@ -231,7 +279,9 @@ def test_conversions_refuse_values_outside_their_ranges(build: object, key: str,
 
 
 def test_a_channel_refuses_something_that_is_not_a_conversion() -> None:
-    with pytest.raises(ConfigError, match="conversion: expected None, LineConversion, LookupConversion or CurveChannel"):
+    with pytest.raises(
+        ConfigError, match="conversion: expected None, LineConversion, LookupConversion or CurveChannel"
+    ):
         ChannelConfig(0, "ch00", 0.0, 0.0, True, PAPER_EFFECTS, SensorParams(), None, (M, N))  # type: ignore[arg-type]
 
 
