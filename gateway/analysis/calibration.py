@@ -548,7 +548,7 @@ def format_report(cal: Calibration) -> str:
             else ""
         )
     )
-    out.append(outside_range_words(cal))
+    out += outside_range_words(cal)
     out.append(
         f"fit objective: {OBJECTIVE_WORDS[fit.objective]} (requested: {cal.objective_mode}; zero offset: "
         f"{cal.offset_mode}); held-out force errors are against "
@@ -602,23 +602,23 @@ def format_report(cal: Calibration) -> str:
     return "\n".join(out)
 
 
-def outside_range_words(cal: Calibration) -> str:
-    """What the channel reads outside its calibrated range (a line of the report)."""
+def outside_range_words(cal: Calibration) -> list[str]:
+    """What the channel reads outside its calibrated range (lines of the report)."""
     lo, hi = cal.force_range_n
     model_lo, model_hi = model_force_range(cal.force_range_n)
     rival = ""
     if cal.offset_words():
         rival = (
-            f" (a channel written as a line, lookup or curve: outside the record's "
+            f" (written as a line, lookup or curve: outside the record's "
             f"{cal.record_range_n[0]:.3g}-{cal.record_range_n[1]:.4g} N)"
         )
-    return (
+    return [
         f"outside the calibrated range: below {lo:.3g} N and above {hi:.4g} N the channel reads forces "
-        f"extrapolated along its curve, flagged `extrapolated`{rival}; at or below 0 N it reads no_contact "
-        f"(the physical model is written over {model_lo:.3g}-{model_hi:.4g} N: no_contact below "
-        f"{model_lo:.3g} N, saturated above {model_hi:.4g} N; a line with n < 0 reads no_contact below "
-        "its force_min_n)"
-    )
+        f"extrapolated along its curve, flagged `extrapolated`{rival}; at or below 0 N it reads no_contact",
+        f"  (the physical model is written over {model_lo:.3g}-{model_hi:.4g} N, force_min_n/force_max_n: "
+        f"no_contact below {model_lo:.3g} N, saturated above {model_hi:.4g} N; a line with n < 0 reads "
+        "no_contact below its force_min_n, where a sensor at rest would read a phantom force)",
+    ]
 
 
 def ranking_lines(cal: Calibration) -> list[str]:

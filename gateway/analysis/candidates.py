@@ -17,7 +17,11 @@ Fitting one candidate (the reference force drives the state, as in the physical 
    the power law and the line; pooled adjacent violators for the lookup);
 3. with the curve's x_hat = curve(R), the fractions a1, a2, beta solve the linear least squares
    x_hat - F = a1 K1 + a2 K2 + beta F s; the time constants and the play width are chosen on
-   a grid by the training residual, then steps 2-3 alternate a few times.
+   a grid by the training residual, then steps 2-3 alternate a few times;
+4. for the power law and the line, the curve's two parameters and the fractions are then
+   solved together from there (one least-squares problem; the time constants, the width and
+   the play's directions stay): the alternation alone moves slowly along the curve's gain,
+   which a creep fraction shares on every hold, and leaves most of the fraction in the curve.
 
 ``rank_candidates`` returns every candidate's held-out force RMS, its drift across held-out
 holds (end minus start error, % of full scale) and its parameter count, best first.
@@ -46,7 +50,7 @@ from ..model.curves import (
     track_series,
 )
 from .fitting import FitData
-from .holds import find_holds
+from .holds import Hold, find_holds, hold_tolerance_n
 from .rivals import LOOKUP_KNOTS, MonotoneLookup
 
 FloatArray = NDArray[np.float64]
@@ -249,8 +253,12 @@ def _design(reg: _Regressors, d: Drift) -> FloatArray:
     return out
 
 
-def fit_candidate(reg: _Regressors, kind: str, form: str) -> CurveChannel:
-    """Fit one curve kind with one drift form to the training rows (module docstring)."""
+def fit_candidate(reg: _Regressors, kind: str, form: str, nested: CurveChannel | None = None) -> CurveChannel:
+    """Fit one curve kind with one drift form to the training rows (module docstring).
+
+    ``nested``, a fit of the same curve with one creep element fewer, is a second start for
+    a two-element form (its element, plus a slow one): the richer form then fits the
+    training rows at least as well as the one it contains."""
     data = reg.data
     rows = data.train
     r = data.resistance_ohm
@@ -274,27 +282,124 @@ def fit_candidate(reg: _Regressors, kind: str, form: str) -> CurveChannel:
             x_hat = CurveChannel(curve).static_force(r)
             reg.read_with(x_hat)
             drift = _fractions(reg, form, grid, x_hat, rows)[0]
+        curve, drift = _refine(reg, form, curve, drift, rows)
+        if nested is not None and DRIFT_FORMS[form][0] == 2:
+            n = nested.drift
+            start = Drift(
+                n.creep_fraction, n.creep_tau_s, 0.01, max(4.0 * n.creep_tau_s, 60.0),
+                n.hysteresis_fraction, n.hysteresis_width_n,
+            )  # fmt: skip
+            here = _training_rms(reg, curve, drift, rows)
+            reg.read_with(CurveChannel(nested.curve).static_force(r))
+            other = _refine(reg, form, nested.curve, start, rows)
+            if _training_rms(reg, *other, rows) < here:
+                curve, drift = other
     return CurveChannel(curve, drift, force_min_n=0.0, force_max_n=reg.full_scale)
+
+
+def _training_rms(reg: _Regressors, curve: StaticCurve, drift: Drift, rows: BoolArray) -> float:
+    """The reference-driven residual x_hat - x(F) on the training rows (N)."""
+    x_hat = CurveChannel(curve).static_force(reg.data.resistance_ohm)
+    reg.read_with(x_hat)
+    return rms((x_hat - reg.force - _design(reg, drift))[rows])
+
+
+def _refine(
+    reg: _Regressors, form: str, curve: StaticCurve, drift: Drift, rows: BoolArray
+) -> tuple[StaticCurve, Drift]:
+    """Step 4 (module docstring): a power law's or a line's two parameters and the fractions
+    by one least-squares problem in force on the training rows, started from ``curve`` and
+    ``drift``; both unchanged for a lookup or if it fails."""
+    elements, hyst = DRIFT_FORMS[form]
+    d = drift
+    r = reg.data.resistance_ohm
+    if not isinstance(curve, PowerLawCurve | LineCurve):
+        return curve, drift
+    hyst_col = reg.hysteresis(d.hysteresis_width_n) if hyst else None
+    ok = rows & np.isfinite(r) & (r > 0)
+    if hyst_col is not None:
+        ok &= np.isfinite(hyst_col)
+    if np.count_nonzero(ok) <= 2 + 2 * elements + hyst:
+        return curve, drift
+    f, g = reg.force[ok], 1.0 / r[ok]
+    power = isinstance(curve, PowerLawCurve)
+    if isinstance(curve, PowerLawCurve):  # x = exp((ln G - ln k) / n)
+        p0, low, high = [math.log(curve.coefficient_s), curve.exponent], [-60.0, 0.05], [20.0, 10.0]
+    else:  # x = (G - c) / m = alpha G + b
+        p0 = [1.0 / curve.slope_s_per_n, -curve.intercept_s / curve.slope_s_per_n]
+        low, high = [0.0, -np.inf], [np.inf, np.inf]
+    taus = [d.creep_tau_s, d.creep2_tau_s][:elements]
+    fractions = [d.creep_fraction, d.creep2_fraction][:elements]
+    # the time constants are refined too (ln tau, within the grid's span and a bit beyond)
+    p0 += fractions + [math.log(t) for t in taus] + [d.hysteresis_fraction] * hyst
+    low += [-0.9] * elements + [math.log(0.3), math.log(3.0)][:elements] + [-0.9] * hyst
+    high += [5.0] * elements + [math.log(300.0), math.log(5000.0)][:elements] + [0.9] * hyst
+    lg = np.log(g)
+
+    def drift_terms(p: FloatArray) -> FloatArray:
+        out = np.zeros(f.size)
+        for i in range(elements):
+            out = out + p[2 + i] * kelvin_response(reg.held, reg.dt, math.exp(p[2 + elements + i]))[ok]
+        if hyst_col is not None:
+            out = out + p[-1] * hyst_col[ok]
+        return out
+
+    def resid(p: FloatArray) -> FloatArray:
+        x = np.exp((lg - p[0]) / p[1]) if power else p[0] * g + p[1]
+        return np.asarray(x - f - drift_terms(p))
+
+    bounds = (np.array(low), np.array(high))
+    sol = least_squares(resid, np.clip(np.array(p0), *bounds), bounds=bounds, x_scale="jac")
+    p = [float(v) for v in sol.x]
+    if not sol.success or not all(math.isfinite(v) for v in p) or not (power or p[0] > 0.0):
+        return curve, drift
+    if rms(resid(sol.x)) > rms(resid(np.clip(np.array(p0), *bounds))):
+        return curve, drift
+    a = p[2 : 2 + elements] + [0.0] * (2 - elements)
+    t = [math.exp(v) for v in p[2 + elements : 2 + 2 * elements]] + taus[
+        len(p[2 + elements : 2 + 2 * elements]) :
+    ]
+    tau1 = t[0] if elements >= 1 else d.creep_tau_s
+    tau2 = t[1] if elements >= 2 else d.creep2_tau_s
+    if elements >= 2 and tau2 < tau1:  # keep the faster element first
+        a[0], a[1], tau1, tau2 = a[1], a[0], tau2, tau1
+    beta = p[-1] if hyst else 0.0
+    # a form's own terms stay on (a fitted zero would make it another form)
+    a1 = a[0] if elements < 1 or a[0] != 0.0 else 1e-9
+    a2 = a[1] if elements < 2 or a[1] != 0.0 else 1e-9
+    beta = beta if not hyst or beta != 0.0 else 1e-9
+    out = Drift(a1, tau1, a2, tau2, beta, d.hysteresis_width_n)
+    if power:
+        return PowerLawCurve(math.exp(p[0]), p[1]), out
+    return LineCurve(1.0 / p[0], -p[1] / p[0]), out
 
 
 def hold_drift_pct(
     time_s: FloatArray, reference_n: FloatArray, force_n: FloatArray, rows: BoolArray, full_scale: float
 ) -> float:
-    """RMS over the holds inside ``rows`` of (mean error over the hold's last 10 %) - (over its
-    first 10 %), as % of ``full_scale``; NaN without a hold."""
+    """RMS over the holds inside ``rows`` of ``hold_change_n``, as % of ``full_scale``; NaN
+    without a hold."""
+    tolerance = hold_tolerance_n(reference_n)
     changes = []
-    for h in find_holds(time_s, reference_n):
-        idx = np.arange(h.start, h.stop)
-        if not rows[idx].all():
+    for h in find_holds(time_s, reference_n, tolerance):
+        if not rows[h.start : h.stop].all():
             continue
-        n = max(1, idx.size // 10)
-        err = force_n[idx] - reference_n[idx]
-        a, b = float(np.nanmean(err[:n])), float(np.nanmean(err[-n:]))
-        if math.isfinite(a) and math.isfinite(b):
-            changes.append(b - a)
+        change = hold_change_n(reference_n, force_n, h, tolerance)
+        if math.isfinite(change):
+            changes.append(change)
     if not changes or not full_scale > 0:
         return math.nan
     return 100.0 * rms(np.asarray(changes)) / full_scale
+
+
+def hold_change_n(reference_n: FloatArray, force_n: FloatArray, hold: Hold, tolerance_n: float) -> float:
+    """How much the error moves across a hold (N): the mean error over the last 10 % of its
+    settled rows (``Hold.settled``) minus the mean over the first 10 %."""
+    h = hold.settled(reference_n, tolerance_n)
+    first, last = h.edges()
+    err = np.asarray(force_n, dtype=np.float64) - np.asarray(reference_n, dtype=np.float64)
+    a, b = float(np.nanmean(err[first])), float(np.nanmean(err[last]))
+    return b - a
 
 
 def score(data: FitData, name: str, channel: CurveChannel, full_scale: float) -> Candidate:
@@ -324,12 +429,15 @@ def rank_candidates(
     if not real_time:
         chosen = [f for f in chosen if DRIFT_FORMS[f][0] == 0]
     out: list[Candidate] = []
+    fitted: dict[tuple[str, str], CurveChannel] = {}
     for kind in kinds:
         for form in chosen:
+            nested = fitted.get((kind, form.replace("creep2", "creep")))
             try:
-                ch = fit_candidate(reg, kind, form)
+                ch = fit_candidate(reg, kind, form, nested)
             except (ValueError, np.linalg.LinAlgError):
                 continue
+            fitted[(kind, form)] = ch
             out.append(score(data, f"{kind} + {form}", ch, reg.full_scale))
     return sorted(
         out, key=lambda c: c.held_out_force_rms_n if math.isfinite(c.held_out_force_rms_n) else math.inf

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final
 
 import numpy as np
@@ -55,6 +55,17 @@ class Hold:
     def edge_rows(self, fraction: float = EDGE_FRACTION) -> int:
         """Rows in each edge: ``fraction`` of the hold's rows, rounded down, at least one."""
         return max(1, math.floor(fraction * self.n_rows + 1e-9))
+
+    def settled(self, force_n: ArrayLike, tolerance_n: float) -> Hold:
+        """The hold without its leading and trailing rows more than half ``tolerance_n`` off
+        its level (the end of the ramp into it, the start of the ramp out of it), whose
+        errors are those of a moving load; itself when nothing is left."""
+        f = np.asarray(force_n, dtype=np.float64)[self.start : self.stop]
+        near = np.flatnonzero(np.abs(f - self.level_n) <= 0.5 * tolerance_n)
+        if near.size < 2:
+            return self
+        first, last = int(near[0]), int(near[-1])
+        return replace(self, start=self.start + first, stop=self.start + last + 1)
 
     def edges(self, fraction: float = EDGE_FRACTION) -> tuple[slice, slice]:
         """The rows of the first and of the last ``fraction`` of the hold (record indices)."""

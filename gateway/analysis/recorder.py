@@ -19,10 +19,11 @@ from pathlib import Path
 from typing import TextIO
 
 from ..config import GatewayConfig
-from ..runtime.snapshot import ChannelStatus, GatewaySnapshot
+from ..runtime.snapshot import VALUED_STATUSES, ChannelStatus, GatewaySnapshot
 from .records import RecordWriter
 
-_WITH_VALUE = {int(ChannelStatus.OK), int(ChannelStatus.NO_CONTACT), int(ChannelStatus.SATURATED)}
+#: the statuses whose row keeps its value: ok, no_contact, saturated, extrapolated
+_WITH_VALUE = {int(s) for s in VALUED_STATUSES}
 _OPEN = int(ChannelStatus.OPEN)
 
 

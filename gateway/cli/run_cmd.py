@@ -42,7 +42,7 @@ from ..metrics.web_config import WebConfig, load_web_config
 from ..model import Divider
 from ..mqtt.link import MqttLink
 from ..runtime.poller import Poller, SnapshotHolder
-from ..runtime.snapshot import ChannelStatus, DeviceSnapshot, GatewaySnapshot
+from ..runtime.snapshot import VALUED_STATUSES, DeviceSnapshot, GatewaySnapshot
 from ..web import FrameHub, WebPage
 from .common import config_option
 from .simulated import gateway_params
@@ -227,11 +227,11 @@ def snapshot_table(snap: GatewaySnapshot) -> str:
         state = "up" if dev.up else f"DOWN ({dev.error})"
         lines.append(f"device {name} on bus {dev.bus}: {state}")
         lines.append(
-            f"  {'channel':<10} {'status':<11} {'resistance_ohm':>15} {'force_n':>9} {'static_n':>9}"
+            f"  {'channel':<10} {'status':<12} {'resistance_ohm':>15} {'force_n':>9} {'static_n':>9}"
         )
         for c in dev.channels():
             lines.append(
-                f"  {c.name:<10} {c.status.label:<11} {_fmt(c.resistance_ohm, '15.1f')} "
+                f"  {c.name:<10} {c.status.label:<12} {_fmt(c.resistance_ohm, '15.1f')} "
                 f"{_fmt(c.force_n, '9.3f')} {_fmt(c.force_static_n, '9.3f')}"
             )
         cop = dev.center_of_pressure_mm
@@ -287,10 +287,8 @@ def render_view(
             if k >= len(views):
                 break
             v = views[k]
-            if v.status in (ChannelStatus.OK, ChannelStatus.SATURATED, ChannelStatus.NO_CONTACT):
-                text = f"{(v.force_n or 0.0):6.2f}"
-            else:
-                text = f"{v.status.label[:6]:>6}"
+            valued = v.status in VALUED_STATUSES  # extrapolated too: it carries a force
+            text = f"{(v.force_n or 0.0):6.2f}" if valued else f"{v.status.label[:6]:>6}"
             if color:
                 shade = _SHADES[min(len(_SHADES) - 1, int((v.force_n or 0.0) / fmax * (len(_SHADES) - 1)))]
                 cells.append(f"\x1b[48;5;{shade}m\x1b[97m {text} \x1b[0m")

@@ -158,12 +158,51 @@ def _conversion(
         raise ConfigError(f"{Context(file).error(where, exc.message)}{note}") from None
 
 
+#: The keys of a calibration's ``[channel.<name>]`` table that are not sensor parameters: the
+#: force range the channel was calibrated on (N; written by ``calibrate``; a force outside it
+#: reads ``extrapolated``).
+CALIBRATED_RANGE_KEYS: Final = ("calibrated_min_n", "calibrated_max_n")
+
+
+def _calibrated_range(cal_ctx: Context, where: str, params: dict[str, Any]) -> tuple[float, float] | None:
+    """Pop ``calibrated_min_n``/``calibrated_max_n`` off a ``[channel.<name>]`` table: the
+    calibrated force range (a missing bound is 0 N / inf), or None when neither is given."""
+    if not any(key in params for key in CALIBRATED_RANGE_KEYS):
+        return None
+    bounds = {"calibrated_min_n": 0.0, "calibrated_max_n": math.inf}
+    for key in CALIBRATED_RANGE_KEYS:
+        if key not in params:
+            continue
+        value = params.pop(key)
+        low_ok = key == "calibrated_min_n" and isinstance(value, int | float) and 0.0 <= value < math.inf
+        high_ok = key == "calibrated_max_n" and isinstance(value, int | float) and 0.0 < value <= math.inf
+        if isinstance(value, bool) or not (low_ok or high_ok):
+            allowed = "[0, inf) N" if key == "calibrated_min_n" else "(0, inf] N"
+            raise cal_ctx.error(
+                join_key(where, key), f"{show_value(value)} is out of range; allowed: {allowed}"
+            )
+        bounds[key] = float(value)
+    low, high = bounds["calibrated_min_n"], bounds["calibrated_max_n"]
+    if not low < high:
+        raise cal_ctx.error(
+            join_key(where, "calibrated_max_n"),
+            f"{high!r} is out of range; allowed: (calibrated_min_n = {low!r}, inf] N",
+        )
+    return low, high
+
+
 def _load_calibration(
     ctx: Context, path: str, file: Path, channel_names: Sequence[str]
-) -> tuple[dict[str, dict[str, float]], dict[str, float], dict[str, tuple[str, dict[str, Any]]]]:
+) -> tuple[
+    dict[str, dict[str, float]],
+    dict[str, float],
+    dict[str, tuple[str, dict[str, Any]]],
+    dict[str, tuple[float, float]],
+]:
     """Per-channel parameter tables ``[channel.<name>]`` of a calibration file, the
-    channels' unloaded baselines (``baseline_ohm`` in the same tables) and their line or
-    lookup tables (``[line.<name>]``, ``[lookup.<name>]``)."""
+    channels' unloaded baselines (``baseline_ohm`` in the same tables), their line or
+    lookup tables (``[line.<name>]``, ``[lookup.<name>]``) and their calibrated force ranges
+    (``calibrated_min_n``/``calibrated_max_n`` in the ``[channel.<name>]`` tables)."""
     if not file.exists():
         raise ctx.error(path, f"{file} does not exist (calibration file)")
     try:
@@ -179,10 +218,16 @@ def _load_calibration(
             raise cal_ctx.error("channel", f"expected tables [channel.<name>], got {type_name(tables)}")
         out: dict[str, dict[str, float]] = {}
         baselines: dict[str, float] = {}
+        ranges: dict[str, tuple[float, float]] = {}
         for name, params in tables.items():
             if name not in channel_names:
                 raise _unknown_channel(cal_ctx, join_key("channel", name), name, channel_names)
             where = join_key("channel", name)
+            if isinstance(params, dict) and any(key in params for key in CALIBRATED_RANGE_KEYS):
+                params = dict(params)
+                calibrated = _calibrated_range(cal_ctx, where, params)
+                if calibrated is not None:
+                    ranges[name] = calibrated
             if isinstance(params, dict) and "baseline_ohm" in params:
                 params = dict(params)
                 value = params.pop("baseline_ohm")
@@ -200,7 +245,7 @@ def _load_calibration(
         conversions = _conversion_tables(cal_ctx, data, channel_names)
     except ConfigError as exc:
         raise ConfigError(f"{exc}{note}") from None
-    return out, baselines, conversions
+    return out, baselines, conversions, ranges
 
 
 def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
@@ -294,9 +339,10 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
     calibrated: dict[str, dict[str, float]] = {}
     calibrated_baselines: dict[str, float] = {}
     conversions: dict[str, tuple[str, dict[str, Any]]] = {}
+    calibrated_ranges: dict[str, tuple[float, float]] = {}
     cal_note = (calibration or Path(), f" (calibration file of {table.at('calibration')} in {ctx.label})")
     if calibration is not None:
-        calibrated, calibrated_baselines, conversions = _load_calibration(
+        calibrated, calibrated_baselines, conversions, calibrated_ranges = _load_calibration(
             ctx, table.at("calibration"), calibration, names
         )
 
@@ -329,7 +375,18 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         if channel_name in conversions:
             conversion = _conversion(cal_note, channel_name, conversions[channel_name], params)
         channels.append(
-            ChannelConfig(i, channel_name, x_mm, y_mm, enabled, effects, params, baseline, conversion)
+            ChannelConfig(
+                i,
+                channel_name,
+                x_mm,
+                y_mm,
+                enabled,
+                effects,
+                params,
+                baseline,
+                conversion,
+                calibrated_ranges.get(channel_name),
+            )
         )
 
     device = DeviceConfig(

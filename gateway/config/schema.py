@@ -155,6 +155,10 @@ class ChannelConfig:
     baseline_ohm: float | None = None
     #: a calibration's line or lookup that reads force instead of the physical model, or None
     conversion: Conversion | None = None
+    #: the force range the channel was calibrated on (N; the calibration file's
+    #: ``calibrated_min_n``/``calibrated_max_n``), or None: a force the channel reads outside
+    #: it is flagged ``extrapolated``
+    calibrated_range_n: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         where = f"channel {self.name!r}"
@@ -175,6 +179,13 @@ class ChannelConfig:
             raise ConfigError(f"{where}: effects: {self.effects!r} must be in canonical order: {canonical!r}")
         if not isinstance(self.params, SensorParams):
             raise ConfigError(f"{where}: params: expected SensorParams, got {type(self.params).__name__}")
+        if self.calibrated_range_n is not None:
+            low, high = self.calibrated_range_n
+            if not (0.0 <= low < high <= float("inf")):
+                raise ConfigError(
+                    f"{where}: calibrated_range_n: {self.calibrated_range_n!r} is out of range; "
+                    "allowed: 0 <= low < high <= inf N"
+                )
         if self.conversion is not None and not isinstance(
             self.conversion, LineConversion | LookupConversion | CurveChannel
         ):

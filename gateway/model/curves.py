@@ -133,8 +133,8 @@ class PowerLawCurve:
 
     def __post_init__(self) -> None:
         _positive("coefficient_s", self.coefficient_s, "S/N^n")
-        e = _positive("exponent", self.exponent, "")
-        if e > 10.0:
+        e = _finite("exponent", self.exponent, "")
+        if not 0.0 < e <= 10.0:
             raise CurveError("exponent", f"{e!r} is out of range; allowed: (0, 10]")
 
     def force(self, resistance_ohm: ArrayLike) -> FloatArray:

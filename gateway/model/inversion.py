@@ -33,6 +33,10 @@ class ForceStatus(enum.IntEnum):
     NO_CONTACT = 1  # resistance at or above R(force_min): reads 0 N
     SATURATED = 2  # resistance at or below R(force_max): reads force_max
     INVALID = 3  # NaN, zero, negative or infinite resistance: reads NaN, never exported
+    #: a force outside the calibrated range, read along the calibration beyond it (never
+    #: from the inversion itself: curves, lines and lookups set it, and the runtime for a
+    #: force of the model outside a channel's calibrated range)
+    EXTRAPOLATED = 4
 
 
 # plain ints for the hot path (numpy probes an enum member's attributes on every use)

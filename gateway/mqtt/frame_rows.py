@@ -7,12 +7,14 @@ from __future__ import annotations
 import math
 from typing import Any, Final
 
-_WITH_VALUE: Final = frozenset({"ok", "no_contact", "saturated"})
-_CONTACT: Final = frozenset({"ok", "saturated"})
+from ..runtime.snapshot import CONTACT_STATUSES, VALUED_STATUSES
+
+_WITH_VALUE: Final = frozenset(s.label for s in VALUED_STATUSES)  # ok, no_contact, saturated, extrapolated
+_CONTACT: Final = frozenset(s.label for s in CONTACT_STATUSES)  # ok, saturated, extrapolated
 
 
 def in_contact(fields: dict[str, Any]) -> list[str]:
-    """Channel names in contact: status ok or saturated with a force above 0 (as the gateway
+    """Channel names in contact: status ok, saturated or extrapolated with a force above 0 (as the gateway
     counts ``channels_in_contact``)."""
     out = []
     for name, status, force in zip(fields["channels"], fields["status"], fields["force_n"], strict=False):
@@ -31,7 +33,7 @@ def recordable(fields: dict[str, Any]) -> tuple[list[tuple[str, float]], int]:
     """A frame's record rows (channel, resistance in ohm) and how many channels have none.
 
     As ``tactile-gateway record``: an open channel is ``inf``; a channel whose status carries
-    a value (ok, no_contact, saturated) records its resistance, ``inf`` when not finite; a
+    a value (ok, no_contact, saturated, extrapolated) records its resistance, ``inf`` when not finite; a
     short, stale or error channel has no row (counted). A frame of a device that was not
     polled successfully (``up`` false) has no rows at all.
     """

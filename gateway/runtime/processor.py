@@ -17,7 +17,12 @@ Pure (no I/O, no clocks: times are passed in). Per channel:
    scrape), so the poll path pays for one inversion, not two. A channel whose calibration
    gives a line or a lookup (``ChannelConfig.conversion``, ``gateway.model.conversion``) is
    read with it instead, statelessly (no creep state; its static estimate is its force).
-3. Status per channel: ok, no_contact, saturated, open, short, stale, error.
+   A channel read through a curve (``gateway.model.curves``) is tracked with its drift state.
+3. Status per channel: ok, no_contact, saturated, open, short, stale, error, extrapolated.
+   A force outside the calibrated range is still read (along the curve, line or lookup, or
+   by the physical model over its own, wider range) and flagged ``extrapolated``: the range
+   of a curve, line or lookup is its own, and a channel whose calibration file gives
+   ``calibrated_min_n``/``calibrated_max_n`` flags any force outside those too.
 4. Array quantities from the channel positions (mm): total force (N), centre of pressure
    (force-weighted mean position over channels in contact), contact area (channels in
    contact x pitch^2, mm^2), peak channel.
@@ -62,8 +67,12 @@ from .status_tables import (
     _CHANNEL_SHORT,
     _CHANNEL_STALE,
     _FINAL_STATUS,
+    _FORCE_EXTRAPOLATED,
     _FORCE_INVALID,
+    _FORCE_OK,
+    _FORCE_SATURATED,
     _TINY_OHM,
+    FINAL_BASE_STRIDE,
     _adc_tables,
 )
 
@@ -159,6 +168,14 @@ class DeviceProcessor:
         self._curve_keys = tuple(
             channel_key(device, chans[k]) for k in (() if self.curves is None else self.curves.positions)
         )
+        # the calibrated force range of each channel that has one (else 0 N to inf: none)
+        ranged = [c.calibrated_range_n for c in chans]
+        self._calibrated: tuple[FloatArray, FloatArray] | None = None
+        if any(r is not None for r in ranged):
+            self._calibrated = (
+                frozen_copy(np.array([0.0 if r is None else r[0] for r in ranged], dtype=np.float64)),
+                frozen_copy(np.array([np.inf if r is None else r[1] for r in ranged], dtype=np.float64)),
+            )
         by_effects: dict[tuple[str, ...], list[int]] = {}
         for k, c in enumerate(chans):
             if c.conversion is None:
@@ -348,13 +365,36 @@ class DeviceProcessor:
         curve_state = state.curve_state
         if self.curves is not None:
             pos = self.curves.positions
+            # the open rail read as a reading (fault bitmaps, _BIG_OHM): no current, an open
+            # sensor at rest, which a curve reads at +inf ohm as 0 N (a finite R reads > 0 N)
+            r_curve = np.where(r_model[pos] >= _BIG_OHM, np.inf, r_model[pos])
+            # the short rail read as a reading (fault bitmaps): less resistance than the
+            # converter resolves. No force along the curve means anything there, and it must
+            # not move the drift state: the curve gets no sample, the channel reads saturated
+            # at the top of its calibrated range
+            short = (r_curve > 0.0) & (r_curve <= _TINY_OHM)
+            if short.any():
+                r_curve = np.where(short, np.nan, r_curve)
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                f, st, x, _, curve_state = self.curves.track(
-                    r_model[pos], curve_state or self.curves.initial_state(), dt
+                f, st, x, extrapolated, curve_state = self.curves.track(
+                    r_curve, curve_state or self.curves.initial_state(), dt
                 )
+            st = np.where(extrapolated, np.int8(_FORCE_EXTRAPOLATED), st)
+            if short.any():
+                top = self.curves.high
+                f = np.where(short, np.where(np.isfinite(top), top, np.nan), f)
+                st = np.where(short, np.int8(_FORCE_SATURATED), st)
             force[pos], model_status[pos] = f, st
             static = np.full(n, np.nan)
             static[pos] = np.where(np.isnan(f), np.nan, np.maximum(x, 0.0))
+        if self._calibrated is not None:
+            # a force read inside the model's (or curve's, line's, lookup's) own range but
+            # outside the range the channel was calibrated on is extrapolated
+            low, high = self._calibrated
+            with np.errstate(invalid="ignore"):
+                outside = (model_status == _FORCE_OK) & ((force < low) | (force > high))
+            if outside.any():
+                model_status = np.where(outside, np.int8(_FORCE_EXTRAPOLATED), model_status)
         return TrackedSample(
             raw, r_out, r_model, base, force, model_status, temperature,
             DeviceState(new_state_model, now, host_time_s, use_device, None, clock_health, curve_state),
@@ -365,7 +405,8 @@ class DeviceProcessor:
         """Second step of ``process``: statuses, array quantities and the snapshot."""
         raw, base, temperature = tracked.raw, tracked.base_status, tracked.temperature_c
         clock = tracked.state.clock
-        code = base * np.int8(8) + tracked.model_status * np.int8(2)
+        # at most 16 * 6 + 2 * 4 + 1 = 105: an int8 (status_tables.FINAL_BASE_STRIDE)
+        code = base * np.int8(FINAL_BASE_STRIDE) + tracked.model_status * np.int8(2)
         if raw.saturated_bits is not None:
             code += raw.saturated_bits[self._pick].view(np.int8)
         status = _FINAL_STATUS[code]

@@ -33,13 +33,17 @@ StatusArray = NDArray[np.int8]
 class ChannelStatus(enum.IntEnum):
     """What one channel's value means in this snapshot."""
 
-    OK = 0  # a force inside the model's range
-    NO_CONTACT = 1  # resistance at or above R(force_min): reads 0 N
+    OK = 0  # a force inside the calibrated range (the model's, where none is calibrated)
+    NO_CONTACT = 1  # resistance at or above R(force_min), a force <= 0 N, or open at rest: reads 0 N
     SATURATED = 2  # at or beyond force_max (model) or ADC at a rail (device bitmap)
     OPEN = 3  # open circuit (ADC 0 counts, +inf ohm, or the device's open bitmap)
     SHORT = 4  # short circuit (ADC full scale, 0 ohm, or the device's short bitmap)
     STALE = 5  # the device did not answer this poll: values are the last ones
     ERROR = 6  # an invalid value (NaN, negative, out of range): no value
+    #: a force (> 0 N, in contact) outside the calibrated range, read along the calibration
+    #: beyond it (a curve, line or lookup extended past its ends; the physical model beyond
+    #: the forces it was calibrated on): a value, but not a calibrated one
+    EXTRAPOLATED = 7
 
     @property
     def label(self) -> str:
@@ -65,14 +69,22 @@ def frozen_copy(a: NDArray[_G]) -> NDArray[_G]:
     return out
 
 
-#: Statuses whose channel carries a force (N) / counts as in contact.
-_STATUS_CODES = np.arange(len(ChannelStatus))
-VALUED = frozen_copy(
-    np.isin(
-        _STATUS_CODES, [int(ChannelStatus.OK), int(ChannelStatus.NO_CONTACT), int(ChannelStatus.SATURATED)]
-    )
+#: The statuses whose channel carries a force (N), and those that count as in contact.
+VALUED_STATUSES: tuple[ChannelStatus, ...] = (
+    ChannelStatus.OK,
+    ChannelStatus.NO_CONTACT,
+    ChannelStatus.SATURATED,
+    ChannelStatus.EXTRAPOLATED,
 )
-IN_CONTACT = frozen_copy(np.isin(_STATUS_CODES, [int(ChannelStatus.OK), int(ChannelStatus.SATURATED)]))
+CONTACT_STATUSES: tuple[ChannelStatus, ...] = (
+    ChannelStatus.OK,
+    ChannelStatus.SATURATED,
+    ChannelStatus.EXTRAPOLATED,
+)
+#: The same as lookup tables by status code.
+_STATUS_CODES = np.arange(len(ChannelStatus))
+VALUED = frozen_copy(np.isin(_STATUS_CODES, [int(s) for s in VALUED_STATUSES]))
+IN_CONTACT = frozen_copy(np.isin(_STATUS_CODES, [int(s) for s in CONTACT_STATUSES]))
 
 
 @dataclass(frozen=True)
@@ -202,7 +214,8 @@ class DeviceSnapshot:
 
 @dataclass(frozen=True)
 class ArrayQuantities:
-    """Whole-array quantities over the channels in contact (status ok or saturated, F > 0)."""
+    """Whole-array quantities over the channels in contact (status ok, saturated or
+    extrapolated, F > 0)."""
 
     total_force_n: float
     center_of_pressure_mm: tuple[float, float] | None

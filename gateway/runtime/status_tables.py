@@ -18,6 +18,7 @@ FloatArray = NDArray[np.float64]
 
 # plain ints: numpy compares these without probing an enum member's attributes (hot path)
 _CHANNEL_ERROR = int(ChannelStatus.ERROR)
+_CHANNEL_EXTRAPOLATED = int(ChannelStatus.EXTRAPOLATED)
 _CHANNEL_NO_CONTACT = int(ChannelStatus.NO_CONTACT)
 _CHANNEL_OK = int(ChannelStatus.OK)
 _CHANNEL_OPEN = int(ChannelStatus.OPEN)
@@ -28,25 +29,39 @@ _DIVIDER_INVALID = int(DividerStatus.INVALID)
 _DIVIDER_OPEN = int(DividerStatus.OPEN)
 _DIVIDER_SHORT = int(DividerStatus.SHORT)
 _DIVIDER_SATURATED = int(DividerStatus.SATURATED)
+_FORCE_EXTRAPOLATED = int(ForceStatus.EXTRAPOLATED)
 _FORCE_INVALID = int(ForceStatus.INVALID)
 _FORCE_NO_CONTACT = int(ForceStatus.NO_CONTACT)
 _FORCE_OK = int(ForceStatus.OK)
 _FORCE_SATURATED = int(ForceStatus.SATURATED)
 
 
+#: The final status is looked up at ``FINAL_BASE_STRIDE`` * base status + 2 * model status +
+#: the device's saturated bit: 2 * 4 + 1 = 9 codes per base status need a stride of 16, and
+#: 16 * 7 + 9 = 121 (the largest base status is ``EXTRAPOLATED`` = 7, never a base) still fits
+#: the int8 the processor computes it in.
+FINAL_BASE_STRIDE = 16
+
+
 def _final_status_table() -> NDArray[np.int8]:
-    """Channel status by 8 * base status + 2 * model status + device saturated bit.
+    """Channel status by 16 * base status + 2 * model status + device saturated bit.
 
     A base status other than OK (open, short, error from the registers) stands; on a usable
-    channel the model's verdict decides, and the device's saturated bit only turns a force
-    inside the range into saturated (at the bottom rail the model already reads no contact).
+    channel the model's verdict decides, and the device's saturated bit turns a force (inside
+    the calibrated range or extrapolated beyond it) into saturated: the converter is at a
+    rail, so the reading is at its limit (at the bottom rail the model already reads no
+    contact).
     """
-    table = np.empty(8 * len(ChannelStatus), dtype=np.int8)
+    assert 2 * max(ForceStatus) + 1 < FINAL_BASE_STRIDE
+    assert FINAL_BASE_STRIDE * max(ChannelStatus) + 2 * max(ForceStatus) + 1 <= np.iinfo(np.int8).max
+    table = np.empty(FINAL_BASE_STRIDE * len(ChannelStatus), dtype=np.int8)
+    table.fill(_CHANNEL_ERROR)  # codes no model status gives
     by_model = {
         _FORCE_OK: _CHANNEL_OK,
         _FORCE_NO_CONTACT: _CHANNEL_NO_CONTACT,
         _FORCE_SATURATED: _CHANNEL_SATURATED,
         _FORCE_INVALID: _CHANNEL_ERROR,
+        _FORCE_EXTRAPOLATED: _CHANNEL_EXTRAPOLATED,
     }
     for base in ChannelStatus:
         for model_status, channel_status in by_model.items():
@@ -54,9 +69,9 @@ def _final_status_table() -> NDArray[np.int8]:
                 value = int(base)
                 if base == ChannelStatus.OK:
                     value = channel_status
-                    if device_saturated and model_status == _FORCE_OK:
+                    if device_saturated and model_status in (_FORCE_OK, _FORCE_EXTRAPOLATED):
                         value = _CHANNEL_SATURATED
-                table[8 * int(base) + 2 * model_status + device_saturated] = value
+                table[FINAL_BASE_STRIDE * int(base) + 2 * model_status + device_saturated] = value
     table.setflags(write=False)
     return table
 

@@ -7,6 +7,7 @@ page and its streams refuse a request without credentials. Writes a screenshot."
 from __future__ import annotations
 
 import base64
+import contextlib
 import os
 import shutil
 import urllib.error
@@ -181,3 +182,104 @@ async def _to_thread(fn: Any, *args: Any) -> Any:
     import asyncio
 
     return await asyncio.to_thread(fn, *args)
+
+
+#: the map's pixels in the colour of an extrapolated channel's dashed outline (#3fd0c9), which
+#: the force colour scale (black, purple, red, orange, yellow) never makes
+EXTRAPOLATED_PIXELS_JS = """() => {
+  const c = document.getElementById("map");
+  const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+  let n = 0;
+  for (let o = 0; o < d.length; o += 4) {
+    if (Math.abs(d[o] - 63) < 24 && Math.abs(d[o + 1] - 208) < 24 && Math.abs(d[o + 2] - 201) < 24) n++;
+  }
+  return n;
+}"""
+
+
+async def test_the_page_draws_extrapolated_channels_apart(browser: Any, tmp_path: Path) -> None:
+    """Channels calibrated on 0.5-5 N reading 0.3 N and 8 N: the page draws them in the colour
+    of their force with a dashed outline, says ``extrapolated`` on hover and in the legend."""
+    import asyncio
+    import math
+    import time
+
+    import numpy as np
+    from prometheus_client import CollectorRegistry
+
+    from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
+    from gateway.config.layout import GridLayout
+    from gateway.metrics.collector import make_registry
+    from gateway.metrics.server import MetricsServer
+    from gateway.modbus.image import RawSample
+    from gateway.model import PAPER_EFFECTS, Divider, SensorParams
+    from gateway.model.conversion import LineConversion
+    from gateway.runtime.poller import SnapshotHolder
+    from gateway.runtime.processor import DeviceProcessor
+    from gateway.runtime.snapshot import GatewaySnapshot
+    from gateway.web import FrameHub, WebPage
+
+    m, n = 2e-5, 1e-6
+    line = LineConversion(m, n, 0.5, 5.0)  # a line calibrated on 0.5-5 N
+    channels = tuple(
+        ChannelConfig(k, f"ch{k:02d}", (k % 4) * PITCH_MM, (k // 4) * PITCH_MM, True, PAPER_EFFECTS,
+                      SensorParams(), None, line)
+        for k in range(16)
+    )  # fmt: skip
+    device = DeviceConfig("arr", 1, "float32", 16, RegisterMap(), Divider(), channels, False,
+                          GridLayout(16, 4, PITCH_MM, PITCH_MM), None)  # fmt: skip
+    forces = [0.0, 0.3, 2.0, 8.0, 0.0, 0.0, 1.0, 0.0, 0.0, 6.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1.0]
+    r = np.array([math.inf if f < 0 else 1.0 / (m * f + n) for f in forces])  # the last: open
+    proc = DeviceProcessor(device, "sim", 0.05)
+    holder = SnapshotHolder()
+    hub = FrameHub(holder)
+    server = MetricsServer(
+        make_registry(holder.get, CollectorRegistry()), "127.0.0.1", 0, None,
+        WebPage(hub, scale_max_n=10.0).install,
+    )  # fmt: skip
+
+    async def publish() -> None:
+        state = proc.initial_state()
+        for seq in range(1, 10_000):
+            now = time.time()
+            snap, state = proc.process(state, RawSample(resistance_ohm=r, device_time_s=seq * 0.05), now, now)
+            holder.publish(GatewaySnapshot.build({"arr": snap}, {}, seq))
+            await asyncio.sleep(0.05)
+
+    with server:
+        feeder = asyncio.create_task(publish())
+        try:
+            page = await browser.new_page(viewport={"width": 1280, "height": 900})
+            errors: list[str] = []
+            page.on("console", lambda msg: errors.append(msg.text) if msg.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            await page.goto(server.base_url + "/")
+            await until_async(lambda: _is(page, "#state", "up"), 10, "the device shown as up")
+            assert "extrapolated (outside the calibrated range)" in await text(page, ".legend")
+            # three channels in the outline's colour: more than a thousand pixels of it
+            await until_async(
+                lambda: page.evaluate(f"() => ({EXTRAPOLATED_PIXELS_JS})() > 1000"), 5, "the dashed outlines"
+            )
+            # the 8 N channel (x 7.5 mm, y 0 mm) on hover: its force, extrapolated
+            box = await page.locator("#map").bounding_box()
+            # the 480 px canvas draws the 10 mm from -1.25 mm to 8.75 mm inside a 12 px margin
+            px_per_mm, scale = (480 - 2 * 12) / 10.0, box["width"] / 480
+            px, py = 12 + px_per_mm * (7.5 + 1.25), 12 + px_per_mm * (0.0 + 1.25)
+            await page.mouse.move(box["x"] + px * scale, box["y"] + py * scale)
+            tip = await text(page, "#tooltip")
+            assert tip == "ch03 (7.5, 0 mm): 8.000 N, extrapolated", tip
+            assert float(await text(page, "#total-force")) == pytest.approx(
+                0.3 + 2.0 + 8.0 + 1.0 + 6.0, abs=1e-3
+            )
+            assert await text(page, "#in-contact") == "5"
+            shot = tmp_path / "extrapolated.png"
+            await page.screenshot(path=str(shot), full_page=True)  # the legend is below the map
+            assert shot.stat().st_size > 10_000
+            if target := os.environ.get("TACTILE_SCREENSHOT_EXTRAPOLATED"):
+                shutil.copyfile(shot, target)
+            await page.close()
+        finally:
+            feeder.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await feeder
+    assert errors == [], errors

@@ -5,7 +5,11 @@
 // force and contact area over the last 30 s, and the device's health.
 "use strict";
 
-const ST = { OK: 0, NO_CONTACT: 1, SATURATED: 2, OPEN: 3, SHORT: 4, STALE: 5, ERROR: 6 };
+const ST = { OK: 0, NO_CONTACT: 1, SATURATED: 2, OPEN: 3, SHORT: 4, STALE: 5, ERROR: 6, EXTRAPOLATED: 7 };
+// the statuses whose channel carries a force (drawn in the colour of its force)
+const VALUED = new Set([ST.OK, ST.NO_CONTACT, ST.SATURATED, ST.EXTRAPOLATED]);
+// an extrapolated channel (a force outside its calibrated range): a dashed outline in this colour
+const EXTRAPOLATED_COLOUR = "#3fd0c9";
 const HISTORY_S = 30;
 const TRAIL_S = 2;
 // a perceptual dark-to-bright map (inferno-like): 0 N is near black, the scale's top is pale yellow
@@ -137,7 +141,7 @@ function drawMap(canvas, d, opts) {
     const x = tr.px(c.x_mm) - side / 2;
     const y = tr.py(c.y_mm) - side / 2;
     let label = null;
-    if (status === ST.OK || status === ST.NO_CONTACT || status === ST.SATURATED) {
+    if (VALUED.has(status)) {
       if (!opts.smooth) {
         ctx.fillStyle = rgb(colour(force || 0, max));
         ctx.fillRect(x, y, side, side);
@@ -147,6 +151,15 @@ function drawMap(canvas, d, opts) {
         ctx.lineWidth = Math.max(2, side * 0.06);
         ctx.strokeRect(x + 2, y + 2, side - 4, side - 4);
         label = "SAT";
+      } else if (status === ST.EXTRAPOLATED) {
+        const w = Math.max(2, side * 0.06);
+        ctx.save();
+        ctx.strokeStyle = EXTRAPOLATED_COLOUR;
+        ctx.lineWidth = w;
+        ctx.setLineDash([2 * w, 1.5 * w]);
+        ctx.strokeRect(x + w, y + w, side - 2 * w, side - 2 * w);
+        ctx.restore();
+        label = "EXT";
       }
     } else {
       const fill = { [ST.OPEN]: ["#555", "#222"], [ST.SHORT]: ["#d0307a", "#401020"],
@@ -198,7 +211,7 @@ function drawSmooth(ctx, d, tr, max) {
   const pts = [];
   d.layout.channels.forEach((c, k) => {
     const s = f.status[k];
-    if (s === ST.OK || s === ST.NO_CONTACT || s === ST.SATURATED) pts.push([c.x_mm, c.y_mm, f.force_n[k] || 0]);
+    if (VALUED.has(s)) pts.push([c.x_mm, c.y_mm, f.force_n[k] || 0]);
   });
   for (let j = 0; j < n; j++) {
     const ym = geo.y0 + ((j + 0.5) / n) * (geo.y1 - geo.y0);

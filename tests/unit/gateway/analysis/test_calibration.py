@@ -148,3 +148,75 @@ def test_a_line_with_a_negative_intercept_is_written_to_read_from_above_its_zero
     # a positive intercept, or a record that starts well above the zero, adds nothing
     assert line_range_lines(ConductanceLine(2e-5, 1e-6), 0.05) == []
     assert line_range_lines(line, 0.6) == []
+
+
+def test_a_channel_calibrated_on_half_to_five_newtons_reads_beyond_it_flagged_extrapolated(
+    tmp_path: Path,
+) -> None:
+    """calibrate on 0.5-5 N holds writes the calibrated range as calibrated_min_n/max_n and the
+    model's range from light touch to 3 x the top; the gateway then reads 0.3 N and 8 N holds
+    as forces flagged extrapolated (not 0 N no_contact and 5 N saturated), and rest as
+    no_contact. The report says what happens outside the range."""
+    import tomllib
+
+    from gateway.modbus.image import RawSample
+    from gateway.runtime.processor import DeviceProcessor
+    from gateway.runtime.snapshot import ChannelStatus
+
+    bench = tmp_path / "bench.csv"
+    _write(bench, [0.0, 0.5, 1.0, 0.0, 2.0, 5.0, 0.5, 3.0, 0.0, 4.0, 1.5, 0.0], 150.0, seed=31)
+    cal_path = tmp_path / "cal.toml"
+    args = ["calibrate", str(bench), "--out", str(cal_path), "--model", "physics"]
+    result = CliRunner().invoke(main, [*args, "--objective", "log-r", "--force-offset", "none"])
+    assert result.exit_code == 0, result.output
+    assert (
+        "outside the calibrated range: below 0.5 N and above 5 N the channel reads forces extrapolated "
+        "along its curve, flagged `extrapolated`; at or below 0 N it reads no_contact"
+    ) in result.output
+    table = tomllib.loads(cal_path.read_text())["channel"]["tip"]
+    assert (table["calibrated_min_n"], table["calibrated_max_n"]) == (0.5, 5.0)
+    assert (table["force_min_n"], table["force_max_n"]) == (0.01, 15.0)
+    config = parse_config(
+        f"""
+[[bus]]
+name = "bench"
+kind = "tcp"
+host = "127.0.0.1"
+port = 5020
+[[bus.device]]
+name = "array1"
+device_id = 1
+profile = "tactile-sim"
+encoding = "float32"
+channels = 1
+calibration = "{cal_path}"
+[[bus.device.channel]]
+index = 0
+name = "tip"
+""",
+        tmp_path / "gateway.toml",
+    )
+    device = config.buses[0].devices[0]
+    assert device.channels[0].calibrated_range_n == (0.5, 5.0)
+    proc = DeviceProcessor(device, "bench", 0.5)
+    holds = tmp_path / "holds.csv"
+    t, f = _write(holds, [0.0, 0.3, 2.0, 8.0, 0.0], 100.0, seed=32)
+    r = read_record(holds).channel("tip").resistance_ohm
+    state = proc.initial_state()
+    seen: dict[float, list[tuple[str, float]]] = {}
+    for k in range(t.size):
+        raw = RawSample(resistance_ohm=r[k : k + 1], open_bits=np.array([False]))  # +inf: open at rest
+        snap, state = proc.process(state, raw, 1e9 + t[k], t[k])
+        if t[k] % 100.0 >= 5.0:  # settled
+            seen.setdefault(float(f[k]), []).append(
+                (ChannelStatus(int(snap.status[0])).label, snap.force_n[0])
+            )
+    for load, label, tolerance_n in (
+        (0.3, "extrapolated", 0.02),
+        (2.0, "ok", 0.05),
+        (8.0, "extrapolated", 0.2),
+    ):
+        assert {s for s, _ in seen[load]} == {label}, (load, seen[load][:3])
+        forces = np.array([v for _, v in seen[load]])
+        assert np.median(np.abs(forces - load)) < tolerance_n, (load, np.median(forces))
+    assert {s for s, _ in seen[0.0]} == {"no_contact"}

@@ -7,8 +7,8 @@ and jittered time).
   the lookup fitted on the same rows;
 - ``calibrate --update`` from the first 3 minutes of another run (another sensitivity)
   brings the error on the rest of that run back to within 2 % of full scale;
-- in 40 s holds, the written calibration's drift-corrected force moves far less than the
-  static curve's (which drifts by more than 5 % of full scale at 49 N).
+- in 40 s holds where the static curve drifts by more than 5 % of full scale (49 N), the
+  written calibration's drift-corrected force stays within 1 % of full scale.
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from gateway.analysis.calibration import Calibration, calibrate
-from gateway.analysis.holds import find_holds
+from gateway.analysis.candidates import hold_change_n
+from gateway.analysis.holds import Hold, find_holds, hold_tolerance_n
 from gateway.analysis.records import read_record
 from gateway.analysis.update import update_from_record
 from gateway.model.curves import CurveChannel, track_series
@@ -30,19 +31,22 @@ PARAMS = FsrParams(a_fast=0.08, tau_fast_s=5.0, a_slow=0.10, tau_slow_s=60.0, ga
 UPDATE_S = 180.0
 
 
-_CALIBRATED: dict[int, tuple[FsrEmulator, Calibration, CurveChannel]] = {}
+_CALIBRATED: dict[tuple[int, float], tuple[FsrEmulator, Calibration, CurveChannel]] = {}
 
 
-def _calibrated(tmp_path: Path, seed: int) -> tuple[FsrEmulator, Calibration, CurveChannel]:
-    """Run 0 of the emulator calibrated (once per seed: a calibration takes seconds)."""
-    if seed not in _CALIBRATED:
-        _CALIBRATED[seed] = _calibrate(tmp_path, seed)
-    return _CALIBRATED[seed]
+def _calibrated(
+    tmp_path: Path, seed: int, hold_s: float = 20.0
+) -> tuple[FsrEmulator, Calibration, CurveChannel]:
+    """Run 0 of the emulator (its calibration protocol with holds of ``hold_s``) calibrated,
+    once per seed and hold (a calibration takes seconds)."""
+    if (seed, hold_s) not in _CALIBRATED:
+        _CALIBRATED[(seed, hold_s)] = _calibrate(tmp_path, seed, hold_s)
+    return _CALIBRATED[(seed, hold_s)]
 
 
-def _calibrate(tmp_path: Path, seed: int) -> tuple[FsrEmulator, Calibration, CurveChannel]:
+def _calibrate(tmp_path: Path, seed: int, hold_s: float) -> tuple[FsrEmulator, Calibration, CurveChannel]:
     emu = FsrEmulator(PARAMS, seed=seed)
-    path = write_record(tmp_path / f"run0-{seed}.csv", [emu.run(calibration_run(hold_s=20.0), 0)])
+    path = write_record(tmp_path / f"run0-{seed}.csv", [emu.run(calibration_run(hold_s=hold_s), 0)])
     record = read_record(path, require_force=True)
     cal = calibrate(record.channel(), metadata=record.metadata)
     best = cal.candidate(cal.best)
@@ -85,24 +89,31 @@ def test_update_from_the_first_minutes_of_another_run_recovers_within_2_percent(
     assert update.after.curve == update.before.curve and update.after.drift == update.before.drift
 
 
-def test_in_holds_the_drift_corrected_force_moves_far_less_than_the_static_curve(tmp_path: Path) -> None:
-    emu, _, channel = _calibrated(tmp_path, 11)
+@pytest.mark.parametrize("seed", [11, 5])
+def test_in_holds_where_the_static_curve_drifts_5_percent_the_tracked_force_stays_within_1(
+    tmp_path: Path, seed: int
+) -> None:
+    # calibrated on holds as long as the ones it reads (40 s); calibrated on 20 s holds, a 40 s
+    # hold is over-corrected by 1.7-2.3 % FS (docs/calibration.md)
+    emu, _, channel = _calibrated(tmp_path, seed, hold_s=40.0)
     run = emu.run(hold_protocol(levels_n=(49.0, 10.0, 35.0, 20.0), hold_s=40.0, rate_n_per_s=5.0), 0)
     tracked, static = track_series(channel, run.resistance_ohm, run.time_s)
     full_scale = 49.0
-    top = [h for h in find_holds(run.time_s, run.force_n) if h.level_n > 45.0]
-    assert top, "the protocol holds 49 N for 40 s"
-    h = top[0]
-    n = max(1, h.n_rows // 10)
+    tolerance = hold_tolerance_n(run.force_n)
+    holds = find_holds(run.time_s, run.force_n, tolerance)
+    assert len(holds) >= 4, "the protocol holds 49, 10, 35 and 20 N for 40 s each"
 
-    def change_pct(force: np.ndarray) -> float:
-        err = force[h.start : h.stop] - run.force_n[h.start : h.stop]
-        return 100.0 * float(np.mean(err[-n:]) - np.mean(err[:n])) / full_scale
+    def change_pct(force: np.ndarray, h: Hold) -> float:
+        return 100.0 * hold_change_n(run.force_n, force, h, tolerance) / full_scale
 
-    static_change, tracked_change = change_pct(static), change_pct(tracked)
-    assert static_change > 5.0, f"the static curve drifts {static_change:.2f} % FS in the 49 N hold"
-    # measured 1.0-1.5 % FS with this emulator (the issue asks for 1 %: see docs/calibration.md)
-    assert abs(tracked_change) < 1.6, (
-        f"drift-corrected {tracked_change:+.2f} % FS vs static {static_change:+.2f}"
-    )
-    assert abs(tracked_change) < static_change / 3.0
+    drifting = 0
+    for h in holds:
+        static_change = change_pct(static, h)
+        tracked_change = change_pct(tracked, h)
+        if static_change > 5.0:  # where the static curve drifts by more than 5 % FS
+            drifting += 1
+            assert abs(tracked_change) <= 1.0, (
+                f"{h.level_n:.1f} N hold: drift-corrected {tracked_change:+.2f} % FS, "
+                f"static {static_change:+.2f}"
+            )
+    assert drifting >= 1, "the 49 N hold drifts by more than 5 % FS on the static curve"

@@ -48,8 +48,18 @@ UNIT_WORDS = re.compile(r"\((N|ohms|mm|mm\^2|s|count|dimensionless)\)|\bohms\b")
 
 
 def _device(name: str, n: int = 4) -> DeviceConfig:
+    # ch01 was calibrated on 0.5-2 N: the 3 N it reads is a force flagged extrapolated
     channels = tuple(
-        ChannelConfig(i, f"ch{i:02d}", (i % 2) * 2.5, (i // 2) * 2.5, True, PAPER_EFFECTS, SensorParams())
+        ChannelConfig(
+            i,
+            f"ch{i:02d}",
+            (i % 2) * 2.5,
+            (i // 2) * 2.5,
+            True,
+            PAPER_EFFECTS,
+            SensorParams(),
+            calibrated_range_n=(0.5, 2.0) if i == 1 else None,
+        )
         for i in range(n)
     )
     layout = GridLayout(n, 2, 2.5, 2.5)
@@ -158,6 +168,7 @@ def test_status_has_one_series_per_status_and_one_is_set() -> None:
     families = _scrape(_snapshot())
     for device, channel, expected in [
         ("left", "ch00", "ok"),
+        ("left", "ch01", "extrapolated"),
         ("left", "ch02", "open"),
         ("left", "ch03", "no_contact"),
         ("right", "ch01", "stale"),
@@ -169,6 +180,9 @@ def test_status_has_one_series_per_status_and_one_is_set() -> None:
         }
         assert set(series) == {s.label for s in ChannelStatus}
         assert [k for k, v in series.items() if v == 1.0] == [expected]
+    # the HELP text lists every status label, the new one last (its code is 7)
+    doc = families["tactile_channel_status"].documentation  # type: ignore[attr-defined]
+    assert doc.endswith("ok, no_contact, saturated, open, short, stale, error, extrapolated"), doc
 
 
 def test_absent_values_are_left_out_never_nan() -> None:

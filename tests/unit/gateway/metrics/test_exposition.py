@@ -3,8 +3,10 @@ collector, for snapshots with every kind of value, and ``promtool`` accepts it."
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +36,15 @@ def _snapshot(seed: int, n_devices: int, names: list[str]) -> GatewaySnapshot:
     for d in range(n_devices):
         n = int(rng.integers(1, 9))
         dev = device_config_for(names[d % len(names)] + str(d), 1, [SensorParams()] * n, min(3, n), 2.5)
+        # some channels calibrated on 0.5-2 N: the forces they read outside it are extrapolated
+        ranged = rng.random(n) < 0.5
+        dev = replace(
+            dev,
+            channels=tuple(
+                replace(c, calibrated_range_n=(0.5, 2.0) if ranged[k] else None)
+                for k, c in enumerate(dev.channels)
+            ),
+        )
         proc = DeviceProcessor(dev, "bus", 0.05)
         counts = rng.integers(0, 65536, n).astype(np.uint16)  # rails included: open, short
         reference = np.where(rng.random(n) < 0.5, rng.normal(2.0, 1.0, n), np.nan)
@@ -89,7 +100,11 @@ def test_promtool_accepts_it(tmp_path: Path, seed: int) -> None:
     promtool = shutil.which("promtool")
     assert promtool is not None, "promtool (Debian prometheus) is installed by the Makefile"
     path = tmp_path / "metrics.txt"
-    path.write_text(render(_snapshot(seed, 3, ["arr"])))
+    text = render(_snapshot(seed, 3, ["arr"]))
+    # the snapshots carry the extrapolated status (a force outside a calibrated range)
+    assert re.search(r'tactile_channel_status\{[^}]*status="extrapolated"\} 1\.0\n', text), text
+    assert "stale, error, extrapolated\n" in text  # the HELP text lists it
+    path.write_text(text)
     with path.open("rb") as f:
         result = subprocess.run(
             [promtool, "check", "metrics"], stdin=f, capture_output=True, text=True, timeout=60

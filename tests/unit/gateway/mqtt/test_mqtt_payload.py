@@ -126,6 +126,28 @@ def test_a_stale_channel_makes_a_binary_frame_down() -> None:
     assert decode_binary(encode_binary(frame))["up"] is False
 
 
+def test_an_extrapolated_channel_in_json_and_binary_frames() -> None:
+    """A force outside the calibrated range: a value (in contact), labelled ``extrapolated``
+    in JSON and status code 7 in the binary layout (the codes before it keep their numbers)."""
+    status = np.array(
+        [ChannelStatus.EXTRAPOLATED, ChannelStatus.OPEN, ChannelStatus.SHORT, ChannelStatus.EXTRAPOLATED],
+        dtype=np.int8,
+    )
+    snap = snapshot(status=status, force_n=np.array([8.0, math.nan, math.nan, 0.3]))
+    frame = frame_dict(snap, 5)
+    assert frame["status"] == ["extrapolated", "open", "short", "extrapolated"]
+    assert frame["force_n"] == [8.0, None, None, 0.3]
+    assert json.loads(encode_json(frame))["status"][0] == "extrapolated"
+    data = encode_binary(frame)
+    codes = np.frombuffer(data, np.uint8, 4, 64 + 12 * 4).tolist()
+    assert codes == [7, 3, 4, 7] and STATUS_LABELS[7] == "extrapolated" and len(STATUS_LABELS) == 8
+    back = decode_binary(data, "arr", list(NAMES))
+    assert back["status"] == frame["status"] and back["up"] is True
+    assert back["force_n"] == [8.0, None, None, float(np.float32(0.3))]
+    with pytest.raises(FrameDecodeError, match=r"status code out of range 0\.\.7"):
+        decode_binary(data[:-1] + bytes([8]))
+
+
 @pytest.mark.parametrize(
     ("mutate", "fragment"),
     [

@@ -205,10 +205,19 @@ def test_frame_time_is_the_device_clock_else_the_host_clock() -> None:
     assert frame_clock_s(fields(2, device_time_s=None)) == 1002.0
 
 
-def test_in_contact_is_ok_or_saturated_with_force() -> None:
-    f = fields(1, channels=["a", "b", "c", "d"], force_n=[1.0, 2.0, 0.0, 3.0],
-               status=["ok", "saturated", "ok", "no_contact"], resistance_ohm=[1.0] * 4)  # fmt: skip
-    assert in_contact(f) == ["a", "b"]
+def test_in_contact_is_ok_saturated_or_extrapolated_with_force() -> None:
+    f = fields(1, channels=["a", "b", "c", "d", "e"], force_n=[1.0, 2.0, 0.0, 3.0, 8.0],
+               status=["ok", "saturated", "ok", "no_contact", "extrapolated"],
+               resistance_ohm=[1.0] * 5)  # fmt: skip
+    assert in_contact(f) == ["a", "b", "e"]
+
+
+def test_an_extrapolated_channel_keeps_its_record_row() -> None:
+    rows, skipped = recordable(
+        fields(1, channels=["a", "b"], force_n=[8.0, 0.3], resistance_ohm=[900.0, None],
+               status=["extrapolated", "extrapolated"])
+    )  # fmt: skip
+    assert rows == [("a", 900.0), ("b", math.inf)] and skipped == 0
 
 
 # ------------------------------------------------------------------------------ options
