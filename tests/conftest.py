@@ -18,6 +18,13 @@ from pathlib import Path
 import pytest
 import pytest_asyncio
 
+# One BLAS thread, as the command line has (gateway/cli/_threads.py): the fits' matrices are
+# small, and a thread pool per process spins on a busy 2-core machine (a calibration measured
+# 25 s with the default pool under load, 5.3 s with one thread). Set before numpy loads (none
+# of the imports above loads it); the environment may say otherwise.
+for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
 #: How long a thread or process that is shutting down may take to be gone (s).
 GRACE_S = 5.0
 

@@ -13,13 +13,16 @@ Two routes add a candidate (``decide``):
    are a factor of about 2 apart at 0.15-0.4 N and close above 1 N, the model's hysteresis is a
    strain offset at every force (held-out log-R RMS 0.4476 -> 0.4439, force 0.187 -> 0.179 N).
 
-A candidate is never added when it makes the held-out force worse, but "worse" is judged twice:
-with the state the model tracks from its own readings (``fit.gap_test``) and with the state the
-record's reference force drives (``known_state_force_rms``). Near an ADC rail one count moves
-the resistance by 10 % or more, the inverted force jitters by more than hysteresis's dead band,
-and the tracked load direction flips on noise: the tracked force then gets worse although the
-model is right. Only a candidate worse both ways is refused; one worse only when tracked is
-added, and the evidence says so.
+**The tracked-force rule, on every route**: a candidate is added only if the held-out force
+RMS with the state the model *tracks from its own readings* (``fit.gap_test.force_rms_n``: the
+drift-corrected inversion run over the record as the runtime runs it, not driven by the
+reference force) is not worse than the current model's: ``candidate <= now * (1 + 1e-9)``
+(``tracked_force_not_worse``; the slack is floating-point rounding, not a tolerance). A
+candidate whose tracked force cannot be computed is refused too. The state the reference force
+drives (``known_state_force_rms``) is only a second condition of the force route, never an
+excuse: near an ADC rail the tracked state may move on read-out noise, but the runtime reads
+with that tracked state, so a candidate that reads worse there is refused
+(``refusal``: "refused: tracked held-out force 1.885 -> 24.85 N").
 """
 
 from __future__ import annotations
@@ -42,10 +45,9 @@ MIN_SCORE_GAIN = 30.0
 UNLOADED_MSE_FLOOR = 1e-4
 #: The runner-up is "indistinguishable" when it achieves this share of the best gain.
 AMBIGUOUS_SHARE = 0.85
-#: A candidate that raises the held-out force RMS by more than this share, plus a quarter of the
-#: force noise floor (smaller changes cannot be told from noise), is not added.
-FORCE_TOLERANCE = 0.02
-FORCE_FLOOR_SHARE = 0.25
+#: The tracked-force rule's slack, relative: floating-point rounding of an RMS over the held-out
+#: rows (about 1e-13 relative), never a tolerance that would let a worse reading in.
+TRACKED_FORCE_SLACK = 1e-9
 #: The force route: the held-out force RMS must fall by at least this share both ways. Twice
 #: the log-R share: on the simulated records (1 % noise and ADC-limited), once the hidden effect
 #: is in, or on a null record, no candidate gains more than 1.6 % (creep2 after hysteresis, its
@@ -163,10 +165,36 @@ def known_state_force_rms(data: FitData, fit: FitResult) -> float:
     return float(np.sqrt(np.mean(err * err))) if err.size else math.nan
 
 
-def _worse_force(candidate: float, now: float, force_floor: float = 0.0) -> bool:
-    if not (math.isfinite(candidate) and math.isfinite(now)):
+def tracked_force_not_worse(candidate: float, now: float) -> bool:
+    """The rule every route obeys: the candidate's tracked held-out force RMS is not worse than
+    the current model's, ``candidate <= now * (1 + TRACKED_FORCE_SLACK)``. A candidate whose
+    tracked force is not finite (no held-out row inverts) is worse; against a current model
+    whose tracked force is not finite, a finite one is not."""
+    if not math.isfinite(candidate):
         return False
-    return candidate > now * (1.0 + FORCE_TOLERANCE) + max(1e-3, FORCE_FLOOR_SHARE * force_floor)
+    if not math.isfinite(now):
+        return True
+    return candidate <= now + TRACKED_FORCE_SLACK * abs(now)
+
+
+def refusal(candidate: CandidateScore, now_force: float) -> str | None:
+    """Why the tracked-force rule refuses ``candidate`` against a model whose tracked held-out
+    force RMS is ``now_force`` (None: it does not)."""
+    after = candidate.gap_test.force_rms_n
+    if tracked_force_not_worse(after, now_force):
+        return None
+    before_text, after_text = distinct(now_force, after)
+    return f"refused: tracked held-out force {before_text} -> {after_text} N"
+
+
+def distinct(a: float, b: float, digits: int = 4) -> tuple[str, str]:
+    """``a`` and ``b`` with ``digits`` significant digits, or as many more (up to 12) as it takes
+    to tell them apart."""
+    for d in range(digits, 13):
+        ta, tb = f"{a:.{d}g}", f"{b:.{d}g}"
+        if ta != tb:
+            break
+    return ta, tb
 
 
 def _force_gain(candidate: float, now: float) -> float:
@@ -208,23 +236,21 @@ def decide(
     table = "; ".join(
         f"{c.effect} {c.gap_test.log_resistance_rms:.4f} / {c.gap_test.force_rms_n:.4g} N" for c in scored
     )
-    tracked_worse = {c.effect for c in scored if _worse_force(c.gap_test.force_rms_n, now_force, force_floor)}
-    # worse with the tracked state and, where it can be computed, with the known state too
-    worse_force = [
-        c.effect
-        for c in scored
-        if c.effect in tracked_worse
-        and (
-            _worse_force(known(c.effect), known(None), force_floor)
-            or not (math.isfinite(known(c.effect)) and math.isfinite(known(None)))
-        )
-    ]
-    eligible = [c for c in scored if c.effect not in worse_force]
+    refused = {c.effect: why for c in scored if (why := refusal(c, now_force)) is not None}
+    eligible = [c for c in scored if c.effect not in refused]
     skipped = (
-        f"; not added because they make the held-out force worse: {', '.join(worse_force)}"
-        if worse_force
+        "; not added because the held-out force read with the tracked state gets worse: "
+        + "; ".join(f"{effect} {why}" for effect, why in refused.items())
+        if refused
         else ""
     )
+    if refused and force_floor > 0.0:
+        small = [e for e in refused if by_effect[e].gap_test.force_rms_n <= now_force + force_floor]
+        if small:
+            skipped += (
+                f" ({', '.join(small)} by less than the force noise floor, {force_floor:.3g} N: "
+                "refused all the same, a worse reading is never added)"
+            )
     if not eligible:
         return (
             None,
@@ -240,7 +266,7 @@ def decide(
             c, finding = by_force
             return (
                 c.effect,
-                f"held-out force RMS {now_force:.4g} -> {c.gap_test.force_rms_n:.4g} N "
+                f"tracked held-out force RMS {now_force:.4g} -> {c.gap_test.force_rms_n:.4g} N "
                 f"({known(None):.4g} -> {known(c.effect):.4g} N with the state the reference force drives) "
                 f"with {c.effect} (+{c.added_parameters} parameters{_undetermined(c)}), log-resistance "
                 f"RMS {now_rms:.4f} -> {c.gap_test.log_resistance_rms:.4f}, score {now:.1f} -> "
@@ -272,18 +298,11 @@ def decide(
             if missing:
                 tie += f"; to separate them, record {missing}"
     where = f" ({findings[0].sentence})" if findings else ""
-    tracking = ""
-    if best.effect in tracked_worse:
-        tracking = (
-            f"; with the state tracked from its own readings the held-out force gets worse "
-            f"({now_force:.4g} -> {best.gap_test.force_rms_n:.4g} N), with the state the reference force "
-            f"drives it does not ({known(None):.4g} -> {known(best.effect):.4g} N): the read-out noise moves "
-            f"the tracked {best.effect} state"
-        )
     evidence = (
-        f"held-out log-resistance RMS {now_rms:.4f} -> {best.gap_test.log_resistance_rms:.4f} and force RMS "
-        f"{now_force:.4g} -> {best.gap_test.force_rms_n:.4g} N with {best.effect} (+{best.added_parameters} "
-        f"parameters{_undetermined(best)}, score {now:.1f} -> {best.score:.1f}){where}{tie}{tracking}; "
+        f"held-out log-resistance RMS {now_rms:.4f} -> {best.gap_test.log_resistance_rms:.4f} and tracked "
+        f"force RMS {now_force:.4g} -> {best.gap_test.force_rms_n:.4g} N with {best.effect} "
+        f"(+{best.added_parameters} parameters{_undetermined(best)}, score {now:.1f} -> {best.score:.1f})"
+        f"{where}{tie}; "
         f"all candidates: {table}{skipped}"
     )
     return best.effect, evidence, runner_up

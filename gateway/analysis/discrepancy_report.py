@@ -18,7 +18,7 @@ def _plot_residuals(data: FitData, fits: list[tuple[str, FitResult]], path: Path
 def _candidate_table(step: Step) -> list[str]:
     lines = [
         "| candidate | added parameters | penalized score (lower is better) | held-out log-R RMS | "
-        "held-out force RMS (N) |",
+        "held-out force RMS, tracked state (N) |",
         "|---|---|---|---|---|",
     ]
     for c in step.candidates:
@@ -27,6 +27,39 @@ def _candidate_table(step: Step) -> list[str]:
             f"| {c.effect}{mark} | {c.added_parameters} | {c.score:.1f} | "
             f"{c.gap_test.log_resistance_rms:.4f} | {c.gap_test.force_rms_n:.4f} |"
         )
+    return lines
+
+
+def _unexplained_section(report: DiscrepancyReport) -> list[str]:
+    """The unexplained-residual verdict, the best empirical alternative and the residual's
+    structure, one table per axis."""
+    u = report.unexplained
+    if u is None:
+        return []
+    title = "An unexplained residual remains" if u.remains else "No unexplained residual"
+    lines = [f"## {title}", ""]
+    lines += [f"- {r}" for r in u.reasons]
+    best = u.best_alternative
+    if best is not None:
+        lines.append(f"- best empirical alternative on held-out force: {best[0]} ({best[1]:.4g} N)")
+    lines.append("- alternatives: " + ", ".join(f"{n} {v:.4g} N" for n, v in u.alternatives))
+    lines.append(f"- structure: {u.structure.sentence()}")
+    lines += [f"- not examined: {s}" for s in u.structure.skipped]
+    lines.append("")
+    for axis in u.structure.axes:
+        lines.append(
+            f"### Residual by {axis.words} (explains {100 * axis.explained_log_r:.0f} % of the log-R "
+            f"residual's variance, {100 * axis.explained_force:.0f} % of the force residual's)"
+        )
+        lines.append("")
+        lines.append("| bin | rows | log-R mean | log-R RMS | force mean (N) | force RMS (N) |")
+        lines.append("|---|---|---|---|---|---|")
+        for b in axis.bins:
+            lines.append(
+                f"| {b.label} | {b.n_rows} | {b.log_r_mean:+.4f} | {b.log_r_rms:.4f} | "
+                f"{b.force_mean_n:+.4g} | {b.force_rms_n:.4g} |"
+            )
+        lines.append("")
     return lines
 
 
@@ -68,6 +101,15 @@ def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path, real_t
             f"Decision: {'add `' + step.added + '`' if step.added else 'add nothing'}. {step.evidence}"
         )
         lines.append("")
+        if step.added:
+            lines.append(
+                f"Tracked held-out force RMS: {step.tracked_before:.4g} -> {step.tracked_after:.4g} N."
+            )
+            lines.append("")
+        for c, why in step.refused():
+            lines.append(f"- `{c.effect}` {why}")
+        if step.refused():
+            lines.append("")
         fits = [("before", step.fit_before)]
         if step.added:
             fits.append(
@@ -76,6 +118,7 @@ def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path, real_t
         png = _plot_residuals(data, fits, out_dir / f"step{i}_residuals.png", real_time)
         lines.append(f"![residuals, step {i}]({png.name})")
         lines.append("")
+    lines += _unexplained_section(report)
     lines.append("## Fitted parameters of the final model (95 % intervals)")
     lines.append("")
     lines.append("| parameter | value | 95 % interval | note |")

@@ -64,11 +64,16 @@ def discrepancy_cmd(
         for f in step.findings:
             click.echo(f"  - {f.sentence}")
         click.echo(f"  -> {'add ' + step.added if step.added else 'add nothing'}: {step.evidence}")
+        if step.added:
+            before, after = step.tracked_before, step.tracked_after
+            click.echo(f"  tracked held-out force RMS {before:.4g} -> {after:.4g} N")
     j = report.as_json()
     click.echo(f"added: {', '.join(j['added']) or 'nothing'}; final model: {', '.join(j['final'])}")
     click.echo(f"held-out gap before: {j['gap_before']}, after: {j['gap_after']}")
     click.echo(f"noise floor (log-R): {report.noise_floor_log:.4g}; {report.noise_description}")
     click.echo(report.rival_summary())
+    if report.unexplained is not None:
+        click.echo(report.unexplained.sentence())
     for note in report.notes:
         click.echo(f"note: {note}")
     if out_dir is not None:

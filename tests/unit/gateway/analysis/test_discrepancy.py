@@ -96,24 +96,43 @@ def adc_limited_record(hidden: tuple[str, ...], seed: int) -> tuple[ChannelRecor
         return record.channel("0"), record.metadata
 
 
+def refused_by_the_rule(report: DiscrepancyReport) -> set[str]:
+    """The candidates the tracked-force rule refused at some step of ``report``."""
+    return {r["effect"] for r in report.as_json()["refused"]}
+
+
+def verdict_is_right(report: DiscrepancyReport, expected: frozenset[str]) -> bool:
+    """Exactly the hidden effects are named, except those the tracked-force rule refused (their
+    tracked held-out force got worse): never a false name."""
+    got = frozenset(report.added)
+    return got <= expected and expected - got <= refused_by_the_rule(report)
+
+
 def test_confusion_table_under_adc_limited_noise_names_exactly_the_hidden_effect() -> None:
     """The front end of ``ADC_LIMITED``: the noise is non-uniform in log-R (the measurement
-    model weights the rows by it) and near the open rail. Every hidden effect is named, and
-    nothing on the null record. Before issue 13, hysteresis was refused because the tracked
-    force got worse (the near-rail readings jitter the inverted force past hysteresis's dead band
-    and flip the tracked load direction; with the state the reference force drives the force
-    improves) and a 5 kohm series resistance was not named (held-out score gain 8 < 30: the
-    low-force rows that separate it from contact are the coarse ones; the held-out force falls
-    3.2 %)."""
+    model weights the rows by it) and near the open rail. Every hidden effect is named but
+    hysteresis, and nothing on the null record. Hysteresis lowers the held-out log-R (0.0200 ->
+    0.0168) but the force read with the tracked state gets worse (0.0336 -> 0.0442 N; with the
+    state the reference force drives it improves): near-rail readings jitter the inverted
+    force past hysteresis's dead band and flip the tracked load direction. Until the tracked-
+    force rule it was named all the same; the runtime reads with the tracked state, so it is
+    now refused, with its numbers. A 5 kohm series resistance is named on the force route
+    (held-out score gain 8 < 30: the low-force rows that separate it from contact are the coarse
+    ones; the held-out force falls 3.2 %)."""
     rows, wrong = [], []
     for case in ADC_CASES:
         hidden = () if case == "nothing" else (case,)
         channel, metadata = adc_limited_record(hidden, 1)
         report = run_discrepancy(channel, baseline=PAPER, record_name=case, metadata=metadata)
         assert "quantization up to" in report.noise_description  # the front end was read
-        if report.added != list(hidden):
+        expected = frozenset(hidden) - {"hysteresis"}
+        if report.added != sorted(expected):
             wrong.append((case, report.added, [s.evidence for s in report.steps]))
-        rows.append(f"| {case} | {', '.join(report.added) or '(nothing)'} |")
+        refused = sorted(refused_by_the_rule(report) & set(hidden))
+        note = f" (refused: {', '.join(refused)})" if refused else ""
+        rows.append(f"| {case} | {', '.join(report.added) or '(nothing)'}{note} |")
+        if case == "hysteresis":
+            assert "hysteresis refused: tracked held-out force" in report.steps[0].evidence
     table = "\n".join(["| hidden | named (seed 1, ADC-limited) |", "|---|---|", *rows])
     print("\n" + table)
     assert not wrong, f"wrong verdicts: {wrong}\n{table}"
@@ -127,20 +146,32 @@ def outcome(case: str, seed: int) -> DiscrepancyReport:
 
 
 def test_confusion_table_names_exactly_the_hidden_effect() -> None:
+    """Exactly the hidden effects are named on seeds 1-3, except that the tracked-force rule may
+    refuse one (then the report carries the refusal and its numbers): hysteresis on seed 2
+    lowers the held-out log-R (0.0143 -> 0.0122) but reads the tracked force worse (0.0249 ->
+    0.0278 N) and is refused. No false name is ever given, and where the hidden effects are
+    all named no unexplained residual remains."""
     rows = []
     wrong = []
+    missed: set[tuple[str, int, str]] = set()
     for case, (_, expected) in CASES.items():
         named: Counter[str] = Counter()
         for seed in SEEDS:
             report = outcome(case, seed)
             got = frozenset(report.added)
             named.update(report.added or ["(nothing)"])
-            if got != expected:
+            named.update(f"{e} refused" for e in expected - got)
+            if not verdict_is_right(report, expected):
                 wrong.append((case, seed, sorted(got)))
+            missed.update((case, seed, e) for e in expected - got)
+            if got == expected:
+                assert report.unexplained is not None and not report.unexplained.remains, (case, seed)
         rows.append(f"| {case} | {', '.join(f'{k} x{v}' for k, v in sorted(named.items()))} |")
     table = "\n".join(["| hidden | named (over seeds 1-3) |", "|---|---|", *rows])
     print("\n" + table)
     assert not wrong, f"wrong verdicts: {wrong}\n{table}"
+    # the one refusal seen: more would mean the rule costs more true names than it did
+    assert missed <= {("hysteresis", 2, "hysteresis")}, missed
 
 
 @pytest.mark.parametrize("case", list(CASES))

@@ -1,14 +1,21 @@
-"""Model choice on both gaps: near ties add the better candidate; worse force is never added."""
+"""Model choice on both gaps: near ties add the better candidate; a candidate that reads the
+tracked held-out force worse is never added, on any route."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 from test_discrepancy import NOISE, world_channel  # same directory (rootdir-relative import mode)
 
 from gateway.analysis.diagnostics import Finding
 from gateway.analysis.discrepancy import CandidateScore, _decide, _penalized
-from gateway.analysis.discrepancy_choice import known_state_force_rms
+from gateway.analysis.discrepancy_choice import (
+    TRACKED_FORCE_SLACK,
+    known_state_force_rms,
+    refusal,
+    tracked_force_not_worse,
+)
 from gateway.analysis.fitting import FitData, fit_channel
 
 
@@ -47,22 +54,59 @@ def test_a_candidate_that_makes_the_force_worse_is_not_added() -> None:
     scored = [CandidateScore("contact", 1, worse, _penalized(contact, data), contact, known_worse)]
     added, evidence, _ = _decide(base, data, scored, ())
     assert added is None
-    assert "make the held-out force worse: contact" in evidence
+    before, after = base.gap_test.force_rms_n, worse.force_rms_n
+    assert f"contact refused: tracked held-out force {before:.4g} -> {after:.4g} N" in evidence
 
 
-def test_a_candidate_worse_only_with_the_tracked_state_is_added_and_the_evidence_says_so() -> None:
-    """Near an ADC rail the tracked state (hysteresis direction) moves on read-out noise: the
-    tracked force gets worse although, with the state the reference force drives, it improves."""
+def test_a_candidate_worse_only_with_the_tracked_state_is_refused_too() -> None:
+    """Before: near an ADC rail the tracked state (hysteresis direction) moves on read-out noise,
+    and a candidate worse only with the tracked state was added because, with the state the
+    reference force drives, it improved. The runtime reads with the tracked state, so such a
+    candidate now is refused on the log-R route as on the force route."""
     data = FitData.from_channel(world_channel((), 2))
     base = fit_channel(data, ("tunneling", "creep"))
     contact = fit_channel(data, ("tunneling", "contact", "creep"))
     worse = replace(contact.gap_test, force_rms_n=base.gap_test.force_rms_n * 1.5)
     known = known_state_force_rms(data, contact)
     assert known < known_state_force_rms(data, base)
+    # it wins clearly on log-R (route 1) ...
+    assert _penalized(contact, data) < _penalized(base, data) - 30.0
     scored = [CandidateScore("contact", 1, worse, _penalized(contact, data), contact, known)]
     added, evidence, _ = _decide(base, data, scored, ())
+    assert added is None, evidence
+    assert "contact refused: tracked held-out force" in evidence
+
+
+def test_the_rule_allows_floating_point_slack_only() -> None:
+    """``candidate <= now * (1 + 1e-9)``: equal (or worse by rounding) passes, one part in a
+    million worse does not; a candidate whose tracked force cannot be computed is refused."""
+    assert TRACKED_FORCE_SLACK <= 1e-9
+    assert tracked_force_not_worse(1.0, 1.0)
+    assert tracked_force_not_worse(1.0 + 1e-12, 1.0)
+    assert tracked_force_not_worse(0.5, 1.0)
+    assert not tracked_force_not_worse(1.0 + 1e-6, 1.0)
+    assert not tracked_force_not_worse(math.nan, 1.0)
+    assert tracked_force_not_worse(1.0, math.nan)
+    assert not tracked_force_not_worse(0.0 + 1e-15, 0.0)
+
+
+def test_a_clear_log_r_win_one_part_in_a_million_worse_on_tracked_force_is_refused() -> None:
+    data = FitData.from_channel(world_channel((), 2))
+    base = fit_channel(data, ("tunneling", "creep"))
+    contact = fit_channel(data, ("tunneling", "contact", "creep"))
+    now = base.gap_test.force_rms_n
+    hair = replace(contact.gap_test, force_rms_n=now * (1.0 + 1e-6))
+    candidate = CandidateScore("contact", 1, hair, _penalized(contact, data), contact)
+    added, evidence, _ = _decide(base, data, [candidate], ())
+    assert added is None
+    why = refusal(candidate, now)
+    # the numbers are printed with as many digits as it takes to tell them apart
+    assert why is not None and why in evidence
+    before, after = why.removeprefix("refused: tracked held-out force ").removesuffix(" N").split(" -> ")
+    assert before != after
+    equal = replace(candidate, gap_test=replace(contact.gap_test, force_rms_n=now))
+    added, evidence, _ = _decide(base, data, [equal], ())
     assert added == "contact", evidence
-    assert "with the state tracked from its own readings the held-out force gets worse" in evidence
 
 
 def test_the_force_route_needs_a_finding_on_the_effects_axis() -> None:
@@ -85,3 +129,11 @@ def test_the_force_route_needs_a_finding_on_the_effects_axis() -> None:
     assert added == "hysteresis" and "added on the force" in evidence, evidence
     added, evidence, _ = _decide(base, data, [weak], (temperature,))
     assert added is None, evidence
+    # the force route obeys the tracked-force rule too: a candidate that reads force better
+    # with the state the reference force drives but worse with the tracked state is refused
+    tracked_worse = replace(
+        weak, gap_test=replace(with_h.gap_test, force_rms_n=base.gap_test.force_rms_n * 1.1)
+    )
+    tracked_worse = replace(tracked_worse, known_force_n=0.5 * known_state_force_rms(data, base))
+    added, evidence, _ = _decide(base, data, [tracked_worse], (direction,))
+    assert added is None and "hysteresis refused: tracked held-out force" in evidence, evidence
