@@ -216,15 +216,15 @@ def test_rank_candidates_finds_the_creep_it_was_made_with() -> None:
     best = ranked[0]
     assert best.kind == "power_law"
     assert DRIFT_FORMS[best.drift_form][0] >= 1, best.name  # a power law with creep
-    # its creep: the fraction within 10 %, the time constant on the grid point it was made with
+    # its creep: the fraction and the time constant (refined off the grid) within 10 %
     assert best.channel.drift.creep_fraction == pytest.approx(A_TRUE, rel=0.10)
-    assert best.channel.drift.creep_tau_s == TAU_TRUE
+    assert best.channel.drift.creep_tau_s == pytest.approx(TAU_TRUE, rel=0.10)
     assert abs(best.channel.drift.hysteresis_fraction) < 0.05  # none was put in
 
     # the candidate of exactly the record's form recovers all of it
     creep = by_name["power_law + creep"]
     assert creep.channel.drift.creep_fraction == pytest.approx(A_TRUE, rel=0.02)
-    assert creep.channel.drift.creep_tau_s == TAU_TRUE
+    assert creep.channel.drift.creep_tau_s == pytest.approx(TAU_TRUE, rel=0.02)
     assert isinstance(creep.channel.curve, PowerLawCurve)
     assert creep.channel.curve.coefficient_s == pytest.approx(K_TRUE, rel=0.02)
     assert creep.channel.curve.exponent == pytest.approx(N_TRUE, rel=0.01)
