@@ -271,7 +271,7 @@ def ch_record(record: object, name: str) -> object:
 
 
 #: The top-level tables a calibration file has (``analysis.calibration.calibration_toml``).
-_CALIBRATION_TABLES = frozenset({"meta", "channel", "line", "lookup"})
+_CALIBRATION_TABLES = frozenset({"meta", "channel", "line", "lookup", "curve"})
 
 
 def _check_out(path: Path, overwrite: bool) -> None:
