@@ -40,6 +40,7 @@ from scipy.optimize import least_squares
 from ..model.curves import (
     CURVE_KINDS,
     DRIFT_FORMS,
+    PLAY_SHARES,
     CurveChannel,
     Drift,
     LineCurve,
@@ -184,16 +185,18 @@ class _Regressors:
 
 
 def reading_noise_n(x_hat: FloatArray, force_n: FloatArray, rows: BoolArray) -> float:
-    """The noise of the curve's reading at its loudest (N): the 90th percentile of the change
-    of x_hat - F between consecutive rows, as a Gaussian sigma (/ (1.645 sqrt 2))."""
-    d = np.diff(np.where(rows, x_hat - force_n, np.nan))
+    """The noise of the curve's reading where it is loudest, in the top half of the force
+    range (N): the 90th percentile of the change of x_hat - F between consecutive rows there,
+    as a Gaussian sigma (/ (1.645 sqrt 2))."""
+    top = rows & (force_n > 0.5 * float(np.max(np.where(rows, force_n, 0.0), initial=0.0)))
+    d = np.diff(np.where(top, x_hat - force_n, np.nan))
     d = np.abs(d[np.isfinite(d)])
     return float(np.quantile(d, 0.9)) / (1.645 * math.sqrt(2.0)) if d.size >= 10 else 0.0
 
 
-#: The play must be this many reading-noise sigmas wide: a narrower one turns between its
-#: branches on noise, and the force jumps by 2 beta F each time.
-PLAY_NOISE_SIGMAS = 4.0
+#: The narrowest play (``PLAY_SHARES``) must be this many reading-noise sigmas wide: a narrower
+#: one turns between its branches on noise, and the force jumps by beta F / len(PLAY_SHARES).
+PLAY_NOISE_SIGMAS = 2.0
 
 
 def _grid(form: str, full_scale: float, noise_n: float = 0.0) -> list[tuple[float, float, float]]:
@@ -204,7 +207,10 @@ def _grid(form: str, full_scale: float, noise_n: float = 0.0) -> list[tuple[floa
     tau2s = TAU2_GRID_S if elements >= 2 else (d.creep2_tau_s,)
     widths: tuple[float, ...] = (d.hysteresis_width_n,)
     if hyst:
-        wide = [w * full_scale for w in WIDTH_GRID_FS if w * full_scale >= PLAY_NOISE_SIGMAS * noise_n]
+        narrowest = min(PLAY_SHARES)
+        wide = [
+            w * full_scale for w in WIDTH_GRID_FS if narrowest * w * full_scale >= PLAY_NOISE_SIGMAS * noise_n
+        ]
         widths = tuple(wide) or (max(WIDTH_GRID_FS) * full_scale,)
     return [(t1, t2, w) for t1 in tau1s for t2 in tau2s for w in widths if elements < 2 or t2 >= 3 * t1]
 
