@@ -18,8 +18,21 @@ limit is reached, and a line when it is left); a connection that has not sent a 
 request head within ``header_timeout_s`` (and an idle keep-alive connection after as long) is
 closed, and so is a TLS handshake not done by then. Connections cost no threads: the server
 has one thread for its loop, two workers (``/metrics``, the page's blocking work) and one
-for bcrypt, so a flood of wrong passwords keeps at most one core busy and queues; a scraper
-whose credentials were verified before is answered without waiting for that queue.
+for bcrypt, so a flood of wrong passwords keeps at most one core busy. At most
+``auth_queue`` bcrypt checks wait or run at once; a request that would be one more is
+answered 503 with ``Retry-After`` at once, and a scraper whose credentials were verified
+before is answered without waiting for that queue at all.
+
+Requests to anything but ``/metrics`` (the page and its server-sent event streams, which
+last) are served at most ``page_slots`` at once (``max_connections`` less a
+``RESERVED_SHARE``); one more is answered 503 with ``Retry-After`` and its connection closed,
+so stalled or endless stream clients never take the connections ``/metrics`` needs.
+
+A malformed request (a request line or header over 8 KiB, too many headers, Content-Length
+with Transfer-Encoding, TLS on the plain port...) is answered 400 by aiohttp and counted by
+cause in ``tactile_http_bad_requests_total``; the log gets one line per cause at most every
+``BAD_REQUEST_LOG_INTERVAL_S`` (with the count of those not logged), never a traceback.
+Refusals are counted in ``tactile_http_refused_total`` by reason.
 """
 
 from __future__ import annotations
@@ -29,11 +42,22 @@ import contextlib
 import logging
 import socket
 import threading
-from collections.abc import Awaitable, Callable
+import time
+from collections.abc import Awaitable, Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 from aiohttp import web
+from aiohttp.http_exceptions import (
+    BadHttpMethod,
+    BadStatusLine,
+    HttpProcessingError,
+    InvalidHeader,
+    InvalidURLError,
+    LineTooLong,
+)
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
+from prometheus_client.core import CounterMetricFamily, Metric
 
 from .web_config import BasicAuth, WebConfig
 
@@ -52,6 +76,14 @@ MAX_CONNECTIONS = 512
 HEADER_TIMEOUT_S = 10.0
 #: worker threads of the server's loop (``/metrics`` bodies, blocking work of the page)
 WORKERS = 2
+#: bcrypt checks running or waiting at once; one more is answered 503 with Retry-After
+AUTH_QUEUE = 4
+#: the share of ``max_connections`` long-lived (server-sent events) responses may not take
+RESERVED_SHARE = 0.25
+#: a malformed request's cause is logged at most once per this (the rest are counted)
+BAD_REQUEST_LOG_INTERVAL_S = 60.0
+#: the reasons of ``tactile_http_refused_total``
+REFUSED_REASONS = ("connections", "streams", "auth_queue")
 #: how long a refused connection is drained before it is closed
 _REFUSED_LINGER_S = 1.0
 _BUSY = (
@@ -63,6 +95,136 @@ _BUSY = (
 
 def _text(status: int, body: bytes, extra: dict[str, str] | None = None) -> web.Response:
     return web.Response(status=status, body=body, headers={"Content-Type": _TEXT, **(extra or {})})
+
+
+def busy(body: bytes) -> web.Response:
+    """A 503 with ``Retry-After`` that closes its connection (the slot is free at once)."""
+    resp = _text(503, body, {"Retry-After": "1"})
+    resp.force_close()
+    return resp
+
+
+def bad_request_cause(exc: BaseException) -> str:
+    """A short, bounded label for why aiohttp refused a request."""
+    message = getattr(exc, "message", "") or ""
+    if isinstance(exc, BadHttpMethod):
+        return "tls_on_plain_http" if "HTTPS" in message else "bad_method"
+    if isinstance(exc, LineTooLong):
+        return "line_too_long"
+    if isinstance(exc, InvalidURLError):
+        return "bad_url"
+    if isinstance(exc, BadStatusLine):
+        return "bad_request_line"
+    if isinstance(exc, InvalidHeader):
+        return "bad_header"
+    if "Too many headers" in message:
+        return "too_many_headers"
+    if "Transfer-Encoding" in message and "Content-Length" in message:
+        return "content_length_and_transfer_encoding"
+    return "bad_request"
+
+
+class HttpCounters:
+    """The server's counters and their collector: malformed requests by cause, refusals by
+    reason. Counted on the server's loop, read by a scrape from a worker thread."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.bad_requests: dict[str, int] = {}
+        self.refused: dict[str, int] = dict.fromkeys(REFUSED_REASONS, 0)
+
+    def bad_request(self, cause: str) -> None:
+        with self._lock:
+            self.bad_requests[cause] = self.bad_requests.get(cause, 0) + 1
+
+    def refuse(self, reason: str) -> None:
+        with self._lock:
+            self.refused[reason] += 1
+
+    def collect(self) -> Iterator[Metric]:
+        with self._lock:
+            bad, refused = dict(self.bad_requests), dict(self.refused)
+        family = CounterMetricFamily(
+            "tactile_http_bad_requests",
+            "Malformed requests the HTTP server answered 400 (or closed), by cause",
+            labels=["cause"],
+        )
+        for cause in sorted(bad):
+            family.add_metric([cause], bad[cause])
+        yield family
+        family = CounterMetricFamily(
+            "tactile_http_refused",
+            "Requests or connections the HTTP server refused with a 503, by reason (connections: "
+            "the connection limit; streams: the share of the page and its event streams; "
+            "auth_queue: the bcrypt queue)",
+            labels=["reason"],
+        )
+        for reason in REFUSED_REASONS:
+            family.add_metric([reason], refused[reason])
+        yield family
+
+
+class _RequestLog:
+    """The logger aiohttp's request handlers get: a malformed request (a client's fault) is
+    counted and logged as one line per cause at most every ``interval_s`` (with the count of
+    those not logged since), never with a traceback; anything else goes to aiohttp's logger."""
+
+    def __init__(
+        self,
+        counters: HttpCounters,
+        interval_s: float = BAD_REQUEST_LOG_INTERVAL_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._counters = counters
+        self._interval_s = interval_s
+        self._clock = clock
+        self._last: dict[str, float] = {}
+        self._unlogged: dict[str, int] = {}
+        self._inner = logging.getLogger("aiohttp.server")
+
+    def _client_error(self, kw: dict[str, Any]) -> HttpProcessingError | None:
+        exc = kw.get("exc_info")
+        return exc if isinstance(exc, HttpProcessingError) else None
+
+    def _count(self, exc: HttpProcessingError, args: tuple[Any, ...]) -> None:
+        cause = bad_request_cause(exc)
+        self._counters.bad_request(cause)
+        now = self._clock()
+        last = self._last.get(cause)
+        if last is not None and now - last < self._interval_s:
+            self._unlogged[cause] = self._unlogged.get(cause, 0) + 1
+            return
+        self._last[cause] = now
+        unlogged = self._unlogged.pop(cause, 0)
+        remote = args[1] if len(args) > 1 else "?"
+        detail = " ".join(str(exc.message).split())[:120]
+        log.warning(
+            "HTTP server: malformed request (%s) from %s answered %d: %s%s; this cause is logged "
+            "at most every %g s (tactile_http_bad_requests_total counts each)",
+            cause,
+            remote,
+            exc.code,
+            detail,
+            f" ({unlogged} more since the last line)" if unlogged else "",
+            self._interval_s,
+        )
+
+    def exception(self, *args: Any, **kw: Any) -> None:
+        exc = self._client_error(kw)
+        if exc is not None:
+            self._count(exc, args)
+        else:
+            self._inner.exception(*args, **kw)
+
+    def debug(self, *args: Any, **kw: Any) -> None:
+        exc = self._client_error(kw)
+        if exc is not None:
+            self._count(exc, args)
+        else:
+            self._inner.debug(*args, **kw)
+
+    def __getattr__(self, name: str) -> Any:  # warning, info, isEnabledFor, ...
+        return getattr(self._inner, name)
 
 
 class _Limited(asyncio.Protocol):
@@ -81,6 +243,7 @@ class _Limited(asyncio.Protocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         if not self._owner._admit():
             assert isinstance(transport, asyncio.WriteTransport)
+            self._owner.counters.refuse("connections")
             try:
                 transport.write(_BUSY)
                 if transport.can_write_eof():
@@ -133,10 +296,19 @@ class MetricsServer:
         *,
         max_connections: int = MAX_CONNECTIONS,
         header_timeout_s: float = HEADER_TIMEOUT_S,
+        auth_queue: int = AUTH_QUEUE,
     ) -> None:
         self.registry = registry
         self.max_connections = max_connections
         self.header_timeout_s = header_timeout_s
+        self.auth_queue = auth_queue
+        self._auth_pending = 0  # bcrypt checks queued or running (the server's loop only)
+        self.counters = HttpCounters()
+        self._request_log = _RequestLog(self.counters)
+        #: requests to anything but /metrics (the page, its event streams) served at once; the
+        #: rest of the connections are kept for /metrics
+        self.page_slots = max(1, max_connections - max(1, int(max_connections * RESERVED_SHARE)))
+        self._page_busy = 0  # such requests being served (the server's loop only)
         self._open = 0  # admitted connections (touched on the server's loop only)
         self._refused = 0
         self._at_limit = False
@@ -160,6 +332,7 @@ class MetricsServer:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopping: asyncio.Event | None = None
         self._auth_pool: ThreadPoolExecutor | None = None
+        self._registered = False  # self.counters in the registry (while serving)
 
     @property
     def open_connections(self) -> int:
@@ -209,16 +382,35 @@ class MetricsServer:
             # a verified pair is cached (cheap); bcrypt costs up to ~0.3 s: one thread of its own
             ok = self._auth.cached(header)
             if not ok:
+                if self._auth_pending >= self.auth_queue:  # refuse at once rather than queue
+                    self.counters.refuse("auth_queue")
+                    return busy(b"too many logins being checked\n")
+                self._auth_pending += 1
                 try:
                     loop = asyncio.get_running_loop()
                     ok = await loop.run_in_executor(self._auth_pool, self._auth.check, header)
                 except Exception as exc:  # never expected; a client must not be able to fill the log
                     log.debug("basic auth check failed: %r", exc)
                     ok = False
+                finally:
+                    self._auth_pending -= 1
             if not ok:
                 return _text(401, b"Unauthorized\n", {"WWW-Authenticate": 'Basic realm="tactile-gateway"'})
         if request.method not in ("GET", "HEAD"):
             return _text(405, b"Method not allowed\n", {"Allow": "GET, HEAD"})
+        if request.path == "/metrics":
+            return await self._handle(request, handler)
+        if self._page_busy >= self.page_slots:  # event streams last: keep a share for /metrics
+            self.counters.refuse("streams")
+            return busy(b"too many page and stream requests\n")
+        self._page_busy += 1
+        try:
+            return await self._handle(request, handler)
+        finally:
+            self._page_busy -= 1
+
+    @staticmethod
+    async def _handle(request: web.Request, handler: Handler) -> web.StreamResponse:
         try:
             return await handler(request)
         except web.HTTPNotFound:
@@ -281,7 +473,8 @@ class MetricsServer:
         # that long after it opened or after its last response
         runner = web.AppRunner(self._app(), access_log=None, handle_signals=False,
                                shutdown_timeout=SHUTDOWN_TIMEOUT_S,
-                               keepalive_timeout=self.header_timeout_s)  # fmt: skip
+                               keepalive_timeout=self.header_timeout_s,
+                               logger=self._request_log)  # fmt: skip
         listener: asyncio.AbstractServer | None = None
         try:
             await runner.setup()
@@ -333,6 +526,8 @@ class MetricsServer:
             if failure:
                 self.stop()
                 raise failure[0]
+            self.registry.register(self.counters)
+            self._registered = True
             log.info("serving metrics on %s", self.url)
         return self
 
@@ -348,6 +543,10 @@ class MetricsServer:
         self._thread = None
         self._loop = None
         self._sock.close()
+        if self._registered:
+            self._registered = False
+            with contextlib.suppress(KeyError):
+                self.registry.unregister(self.counters)
 
     def __enter__(self) -> MetricsServer:
         return self.start()

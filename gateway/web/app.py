@@ -13,6 +13,11 @@
 * ``/api/live[?device=NAME...]``: server-sent events for the page, the newest frame of each
   device at most ``max_fps`` times a second (newest frame wins, no queue).
 
+An event stream holds a connection for as long as it runs (the server keeps a share of its
+connections for ``/metrics``); a write that a client does not take within
+``write_timeout_s`` (it stopped reading: the socket's buffers are full) ends that stream and
+closes its connection, counted in ``stalled_total``.
+
 The hub is attached to the server's loop while the application runs (``on_startup``) and
 every stream is ended when it stops (``on_shutdown``), so a stop never waits on a client.
 """
@@ -43,6 +48,8 @@ STATIC_FILES: dict[str, str] = {
     "style.css": "text/css; charset=utf-8",
 }
 KEEPALIVE_S = 15.0
+#: a stream's write not taken by the client within this ends the stream (a stalled reader)
+WRITE_TIMEOUT_S = 10.0
 _SSE_HEADERS = {"Content-Type": "text/event-stream", "Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
 _ENDED = (ConnectionError, RuntimeError)  # the client went away mid-write
 
@@ -62,8 +69,12 @@ class WebPage:
         max_fps: float = 30.0,
         scale_max_n: float = 5.0,
         clock: Callable[[], float] = time.monotonic,
+        write_timeout_s: float = WRITE_TIMEOUT_S,
     ) -> None:
         self.hub = hub
+        self.write_timeout_s = write_timeout_s
+        #: streams ended because their client stopped reading
+        self.stalled_total = 0
         self.max_fps = max_fps
         self.scale_max_n = scale_max_n
         self._clock = clock
@@ -149,10 +160,19 @@ class WebPage:
         body = encode_frame(entry.snapshot, entry.seq, entry.counters)
         return web.Response(body=body, headers={"Content-Type": "application/json"})
 
-    @staticmethod
-    async def _open_events(resp: web.StreamResponse, request: web.Request) -> None:
+    async def _open_events(self, resp: web.StreamResponse, request: web.Request) -> None:
         await resp.prepare(request)
-        await resp.write(b"retry: 1000\n\n")
+        await self._write(resp, request, b"retry: 1000\n\n")
+
+    async def _write(self, resp: web.StreamResponse, request: web.Request, chunk: bytes) -> None:
+        """Write, or end the stream (``ConnectionError``) if the client does not take it in time."""
+        try:
+            await asyncio.wait_for(resp.write(chunk), self.write_timeout_s)
+        except TimeoutError:
+            self.stalled_total += 1
+            if request.transport is not None:
+                request.transport.abort()
+            raise ConnectionAbortedError("the client stopped reading") from None
 
     async def _stream(self, request: web.Request) -> web.StreamResponse:
         name = request.match_info["name"]
@@ -173,7 +193,7 @@ class WebPage:
                                      for seq, f in frames)  # fmt: skip
                 else:
                     chunk = b": keepalive\n\n"
-                await resp.write(chunk)
+                await self._write(resp, request, chunk)
         except _ENDED:
             pass
         finally:
@@ -195,13 +215,13 @@ class WebPage:
                     try:
                         await asyncio.wait_for(wake.wait(), KEEPALIVE_S)
                     except TimeoutError:
-                        await resp.write(b": keepalive\n\n")
+                        await self._write(resp, request, b": keepalive\n\n")
                     wake.clear()
                     continue
                 if wait > 0:
                     await asyncio.sleep(wait)  # newer frames replace pending ones meanwhile
                 frames = p.take(self._clock())
-                await resp.write(b"".join(b"event: frame\ndata: %s\n\n" % f for f in frames))
+                await self._write(resp, request, b"".join(b"event: frame\ndata: %s\n\n" % f for f in frames))
         except _ENDED:
             pass
         finally:

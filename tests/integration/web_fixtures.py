@@ -17,10 +17,11 @@ from test_gateway_tcp import array_device
 
 from gateway.config import bus_config_for, gateway_config_for
 from gateway.metrics.collector import make_registry
-from gateway.metrics.server import MetricsServer
+from gateway.metrics.server import MAX_CONNECTIONS, MetricsServer
 from gateway.metrics.web_config import WebConfig
 from gateway.runtime.poller import Poller, SnapshotHolder
 from gateway.web import FrameHub, WebPage
+from gateway.web.app import WRITE_TIMEOUT_S
 from sim_device import ArrayConfig, SimArray, serve_tcp
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
@@ -81,6 +82,7 @@ class Gateway:
     hub: FrameHub
     sim_port: int
     sim: contextlib.AsyncExitStack
+    page: WebPage
 
     async def stop_sim(self) -> None:
         await self.sim.aclose()
@@ -96,17 +98,23 @@ class Gateway:
 
 @contextlib.asynccontextmanager
 async def gateway_with_page(
-    web_config: WebConfig | None = None, speed: float = 3.0, scale_max_n: float = 1.0
+    web_config: WebConfig | None = None,
+    speed: float = 3.0,
+    scale_max_n: float = 1.0,
+    *,
+    max_connections: int = MAX_CONNECTIONS,
+    write_timeout_s: float = WRITE_TIMEOUT_S,
 ) -> AsyncIterator[Gateway]:
     """The simulated array served over loopback Modbus TCP, polled at 20 Hz, and the server
     with the page on an ephemeral port; the simulator can be stopped and restarted."""
     holder = SnapshotHolder()
     registry = make_registry(holder.get, CollectorRegistry())
     hub = FrameHub(holder)
+    page = WebPage(hub, scale_max_n=scale_max_n, write_timeout_s=write_timeout_s)
     server = MetricsServer(
-        registry, "127.0.0.1", 0, web_config, WebPage(hub, scale_max_n=scale_max_n).install
+        registry, "127.0.0.1", 0, web_config, page.install, max_connections=max_connections
     )
-    gw = Gateway(indentation_array(speed), server, holder, hub, 0, contextlib.AsyncExitStack())
+    gw = Gateway(indentation_array(speed), server, holder, hub, 0, contextlib.AsyncExitStack(), page)
     try:
         await gw.start_sim()
         device = array_device(gw.array, "arr", bench=False)
