@@ -380,9 +380,13 @@ class Scenario:
     ) -> Scenario:
         """Parse scenario TOML text; ``source`` names it in error messages."""
         try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ScenarioError(f"{source}: invalid TOML: {exc}") from exc
+            data = tomllib.loads(text.removeprefix("\ufeff"))
+        except RecursionError:
+            raise ScenarioError(
+                f"{source}: invalid TOML: arrays or inline tables nested too deeply"
+            ) from None
+        except ValueError as exc:  # TOMLDecodeError, or an integer of more than 4300 digits
+            raise ScenarioError(f"{source}: invalid TOML: {str(exc).split(';')[0]}") from None
         from .scenario_file import parse_scenario  # the file format builds on this module
 
         return parse_scenario(data, layout or ArrayLayout(), source, default_name)

@@ -15,6 +15,7 @@ import io
 import itertools
 import math
 import os
+import stat
 from array import array
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -96,17 +97,57 @@ class Record:
         return str(self.path) if self.path else "<record>"
 
 
-def read_record(path: str | os.PathLike[str], require_force: bool = False) -> Record:
-    """Read and validate a record file (see the module docstring)."""
+#: A record file larger than this is refused (a 4-million-row record is about 200 MB): an
+#: endless or mistaken input is never read into memory without bound.
+MAX_RECORD_BYTES = 2 * 1024**3
+#: Read in steps of this size, so that Ctrl-C ends a long read between steps.
+_READ_CHUNK = 16 * 1024**2
+
+
+def _size_text(n: int) -> str:
+    for unit, size in (("GiB", 1024**3), ("MiB", 1024**2), ("KiB", 1024)):
+        if n >= size and n % size == 0:
+            return f"{n // size} {unit}"
+    return f"{n} bytes"
+
+
+def read_record(
+    path: str | os.PathLike[str], require_force: bool = False, max_bytes: int | None = None
+) -> Record:
+    """Read and validate a record file (see the module docstring). The file must be a regular
+    file of at most ``max_bytes`` (default ``MAX_RECORD_BYTES``): a device such as /dev/zero,
+    a pipe or a directory is refused unread, and a larger file (or one that grows past the
+    limit while read) is refused naming the limit."""
     p = Path(path)
+    limit = MAX_RECORD_BYTES if max_bytes is None else max_bytes
+    too_large = f"{p}: larger than the limit of {_size_text(limit)} for a record; not read"
     try:
-        text = p.read_text(encoding="utf-8-sig")  # a spreadsheet's byte order mark is not a column
+        # O_NONBLOCK: a named pipe with no writer is refused below, not waited on (it has no
+        # effect on a regular file)
+        with os.fdopen(os.open(p, os.O_RDONLY | os.O_NONBLOCK), "rb") as f:
+            info = os.fstat(f.fileno())
+            if not stat.S_ISREG(info.st_mode):
+                raise RecordError(
+                    f"{p}: not a regular file (a device, pipe or directory); a record is a file"
+                )
+            if info.st_size > limit:
+                raise RecordError(too_large)
+            data = bytearray()
+            while chunk := f.read(min(_READ_CHUNK, limit + 1 - len(data))):
+                data += chunk
+                if len(data) > limit:
+                    raise RecordError(too_large)
     except FileNotFoundError:
         raise RecordError(f"{p}: no such file") from None
-    except UnicodeDecodeError as exc:
-        raise RecordError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    except IsADirectoryError:
+        raise RecordError(f"{p}: is a directory; a record is a file") from None
     except OSError as exc:
         raise RecordError(f"{p}: cannot read ({exc.strerror})") from None
+    try:
+        text = data.decode("utf-8-sig")  # a spreadsheet's byte order mark is not a column
+    except UnicodeDecodeError as exc:
+        raise RecordError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    del data
     return parse_record(text, p, require_force=require_force)
 
 

@@ -281,9 +281,9 @@ def _check_out(path: Path, overwrite: bool) -> None:
     if not path.exists() or overwrite:
         return
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
         kind_ok = bool(data) and set(data) <= _CALIBRATION_TABLES
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):  # ValueError: TOMLDecodeError too
         kind_ok = False
     if not kind_ok:
         raise click.UsageError(

@@ -18,6 +18,14 @@ config_option = click.option(
 )
 
 
+def finite_seconds(ctx: click.Context, param: click.Parameter, value: float | None) -> float | None:
+    """A click callback: a number of seconds must be finite (``nan`` passes a ``FloatRange``,
+    which compares, and ``inf`` would never end)."""
+    if value is not None and not math.isfinite(value):
+        raise click.BadParameter(f"{value} is not a number of seconds; expected a finite number, e.g. 30")
+    return value
+
+
 def parse_float_list(text: str, what: str) -> list[float]:
     """Parse ``"0.5,2,5"`` into floats, with an error that names the bad item."""
     values: list[float] = []

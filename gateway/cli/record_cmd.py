@@ -6,8 +6,10 @@ import asyncio
 import contextlib
 import datetime
 import logging
+import os
 import signal
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -48,7 +50,9 @@ async def record_live(
     until: Callable[[], bool] | None = None,
 ) -> RecorderStats:
     """Poll with ``config`` for ``duration_s`` seconds, or until ``until()`` holds (checked
-    every 50 ms), and write a record to ``out_path``."""
+    every 50 ms), and write a record to ``out_path``: into a temporary file beside it, renamed
+    over it at the end (also after SIGINT/SIGTERM), so that a killed recording never leaves a
+    file that looks like a complete record."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its errors reach us as read errors
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -57,8 +61,10 @@ async def record_live(
         with contextlib.suppress(RuntimeError, ValueError, NotImplementedError):
             loop.add_signal_handler(sig, stop.set)
             handled.append(sig)
+    fd, tmp = tempfile.mkstemp(dir=out_path.parent, prefix=f".{out_path.name}.", suffix=".tmp")
+    written = False
     try:
-        with out_path.open("w", encoding="utf-8", newline="") as fh:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             meta = {
                 "source": "tactile-gateway record",
                 "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
@@ -80,8 +86,18 @@ async def record_live(
                         await asyncio.wait_for(stop.wait(), timeout=wait_s)
             if show_progress:
                 _progress(min(time.monotonic() - t0, duration_s), duration_s, recorder.stats, final=True)
-            return recorder.stats
+            fh.flush()
+            os.fsync(fh.fileno())
+        mask = os.umask(0o022)
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)
+        os.replace(tmp, out_path)
+        written = True
+        return recorder.stats
     finally:
+        if not written:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
         for sig in handled:
             loop.remove_signal_handler(sig)
 
@@ -194,7 +210,16 @@ def paper(out_dir: Path, speed: float) -> None:
     from ..analysis.records import read_record
     from ..model import SensorParams
 
-    out_dir.mkdir(parents=True, exist_ok=True)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise click.UsageError(
+            f"--out: {out_dir} exists and is not a directory (paper writes records and plots into one)"
+        )
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise click.UsageError(
+            f"--out: cannot create the directory {out_dir}: {exc.strerror or exc}"
+        ) from None
     click.echo(
         f"recording the creep tests and a staircase through Modbus (about {5400 / speed:.0f} s; longer on "
         "a busy machine: the simulated clock waits for late polls) ..."

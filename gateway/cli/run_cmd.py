@@ -44,7 +44,7 @@ from ..mqtt.link import MqttLink
 from ..runtime.poller import Poller, SnapshotHolder
 from ..runtime.snapshot import VALUED_STATUSES, DeviceSnapshot, GatewaySnapshot
 from ..web import FrameHub, WebPage
-from .common import config_option
+from .common import config_option, finite_seconds
 from .simulated import gateway_params
 
 log = logging.getLogger("gateway.run")
@@ -384,7 +384,13 @@ def _summary_line(snap: DeviceSnapshot) -> str:
 @click.command("demo")
 @click.option("--port", default=9830, show_default=True, type=click.IntRange(0, 65535), help="metrics port")
 @click.option("--host", default="127.0.0.1", show_default=True, help="metrics address")
-@click.option("--duration", "duration_s", type=click.FloatRange(min=0.0), help="stop after this many seconds")
+@click.option(
+    "--duration",
+    "duration_s",
+    type=click.FloatRange(min=0.0),
+    callback=finite_seconds,
+    help="stop after this many seconds",
+)
 @_log_level
 def demo(port: int, host: str, duration_s: float | None, log_level: str) -> None:
     """Simulated 4x4 array (scenario "indentation") polled by the gateway, with a live view."""

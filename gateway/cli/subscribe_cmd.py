@@ -45,6 +45,7 @@ from ..mqtt.subscriber import (
     recordable,
     run_subscriber,
 )
+from .common import finite_seconds
 
 _NAMES_SHOWN = 8
 
@@ -150,7 +151,11 @@ def _fail(message: str) -> None:
 )
 @click.option("--count", type=click.IntRange(min=1), default=None, help="stop after this many frames")
 @click.option(
-    "--duration", "duration_s", type=click.FloatRange(min=0.0, min_open=True), help="stop after seconds"
+    "--duration",
+    "duration_s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    callback=finite_seconds,
+    help="stop after seconds",
 )
 @click.option("--json", "as_json", is_flag=True, help="print each frame as one JSON object per line")
 @click.option("--quiet", "-q", is_flag=True, help="print no frames (with --out)")
@@ -252,6 +257,12 @@ def subscribe(
         run_subscriber(settings, on_message, should_stop, lambda m: click.echo(m, err=True))
     except SubscribeError as exc:
         error = str(exc)
+    except BaseException:
+        # not expected (a bad message is a counted, reported frame): the frames received so
+        # far are still the record, written whole, and no temporary file is left behind
+        if recorder is not None:
+            recorder.close(keep=stream.stats.frames > 0)
+        raise
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)

@@ -102,14 +102,16 @@ class ParameterSources:
     """Where each parameter of a device's channels comes from: default, device, calibration, channel."""
 
     def __init__(self, text: str, bus_index: int, device_index: int, device: DeviceConfig) -> None:
-        raw: dict[str, Any] = tomllib.loads(text)["bus"][bus_index]["device"][device_index]
+        raw: dict[str, Any] = tomllib.loads(text.removeprefix("\ufeff"))["bus"][bus_index]["device"][
+            device_index
+        ]
         self.device_keys = list(raw.get("model", {}).get("params", {}))
         self.channel_keys: dict[int, list[str]] = {}
         for entry in raw.get("channel", []):
             self.channel_keys[entry["index"]] = list(entry.get("params", {}))
         self.calibration: dict[str, Any] = {}
         if device.calibration is not None:
-            self.calibration = tomllib.loads(device.calibration.read_text(encoding="utf-8")).get(
+            self.calibration = tomllib.loads(device.calibration.read_text(encoding="utf-8-sig")).get(
                 "channel", {}
             )
 

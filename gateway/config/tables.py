@@ -270,8 +270,16 @@ class Table:
 
 
 def parse_toml(ctx: Context, text: str, what: str) -> dict[str, Any]:
+    """The TOML ``text`` of a ``what`` (a leading UTF-8 byte order mark is allowed); every
+    parse failure, including those tomllib does not report as TOML errors (an integer of more
+    than 4300 digits, values nested too deeply), is a ``ConfigError`` naming the file."""
+    text = text.removeprefix("\ufeff")
     try:
         return tomllib.loads(text)
+    except RecursionError:
+        raise ctx.error(
+            "", f"invalid {what}: arrays or inline tables nested too deeply for TOML to be read"
+        ) from None
     except tomllib.TOMLDecodeError as exc:
         message = str(exc)
         found = re.search(r"\s*\(at line (\d+), column (\d+)\)$", message)
@@ -282,6 +290,11 @@ def parse_toml(ctx: Context, text: str, what: str) -> dict[str, Any]:
             line = text.count("\n") + 1
             raise ctx.error("", f"invalid TOML at line {line} (end of {what}): {message}") from None
         raise ctx.error("", f"invalid TOML: {message}") from None
+    except ValueError as exc:  # int(): "Exceeds the limit (4300 digits) for integer string conversion"
+        reason = str(exc).split(";")[0]
+        long = re.search(r"[0-9_]{4301,}", text)
+        where = f" at line {text.count(chr(10), 0, long.start()) + 1}" if long else ""
+        raise ctx.error("", f"invalid TOML{where}: a number too long to read ({reason})") from None
 
 
 def check_private(ctx: Context, path: str, file: Path, what: str) -> None:

@@ -55,6 +55,25 @@ _TLS_VERSIONS = {"TLS12": ssl.TLSVersion.TLSv1_2, "TLS13": ssl.TLSVersion.TLSv1_
 _BCRYPT_HASH = re.compile(r"\$2[aby]\$(\d\d)\$[./A-Za-z0-9]{53}")
 #: bcrypt uses the first 72 bytes of a password; the rest never counted
 BCRYPT_MAX_PASSWORD_BYTES = 72
+#: an HTTP header name: an RFC 9110 token
+_HEADER_NAME = re.compile(r"[!#$%&'*+\-.^_`|~0-9A-Za-z]+")
+_HEADER_NAME_RULE = "letters, digits and !#$%&'*+-.^_`|~ (an HTTP token), e.g. X-Frame-Options"
+#: a header value: printable ASCII, spaces and tabs (never CR or LF, which would end the header)
+_HEADER_VALUE = re.compile(r"[\t\x20-\x7e]*")
+#: headers the server itself sets to frame the body or run the connection: configured, they
+#: would cut or corrupt every response
+_SERVER_HEADERS = (
+    "Connection",
+    "Content-Encoding",
+    "Content-Length",
+    "Content-Type",
+    "Keep-Alive",
+    "Proxy-Connection",
+    "TE",
+    "Trailer",
+    "Transfer-Encoding",
+    "Upgrade",
+)
 
 
 def bcrypt_cost(hashed: bytes) -> int:
@@ -145,6 +164,32 @@ def _check_hash(path: Path, user: str, hashed: object) -> bytes:
     return hashed.encode()
 
 
+def _check_header(path: Path, name: str, value: object) -> str:
+    """A header that the server can send as configured, on every response."""
+    where = f"http_server_config.headers.{name}"
+    if _HEADER_NAME.fullmatch(name) is None:
+        raise _web_error(path, where, f"invalid header name {name!r}; allowed: {_HEADER_NAME_RULE}")
+    if name.lower() in (h.lower() for h in _SERVER_HEADERS):
+        raise _web_error(
+            path,
+            where,
+            f"the server sets {name} itself (it frames the body or runs the connection); allowed: "
+            f"any other header, not {', '.join(_SERVER_HEADERS)}",
+        )
+    if isinstance(value, (dict, list)) or value is None:
+        raise _web_error(path, where, "expected a header value (a string)")
+    text = str(value)
+    if _HEADER_VALUE.fullmatch(text) is None:
+        bad = next(c for c in text if _HEADER_VALUE.fullmatch(c) is None)
+        raise _web_error(
+            path,
+            where,
+            f"the value holds {bad!r}; allowed: printable ASCII characters, spaces and tabs on one line "
+            "(no CR or LF)",
+        )
+    return text
+
+
 def _one_line(exc: yaml.YAMLError) -> str:
     """PyYAML's message (several lines with a source excerpt) as one line with its position."""
     problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
@@ -165,6 +210,10 @@ def load_web_config(path: Path) -> WebConfig:
         data = yaml.safe_load(text) or {}
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: invalid YAML: {_one_line(exc)}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: invalid YAML: lists or mappings nested too deeply") from None
+    except ValueError as exc:  # int(): an integer of more than 4300 digits
+        raise ConfigError(f"{path}: invalid YAML: {str(exc).split(';')[0]}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping at the top level")
     _check_keys(path, "", data, ("tls_server_config", "basic_auth_users", "http_server_config"))
@@ -230,7 +279,7 @@ def load_web_config(path: Path) -> WebConfig:
         raw_headers = http.get("headers") or {}
         if not isinstance(raw_headers, dict):
             raise _web_error(path, "http_server_config.headers", "expected a mapping")
-        headers = {str(k): str(v) for k, v in raw_headers.items()}
+        headers = {str(k): _check_header(path, str(k), v) for k, v in raw_headers.items()}
     config = WebConfig(cert, key, client_ca, auth_type, min_version, users, headers)
     try:
         config.ssl_context()

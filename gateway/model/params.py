@@ -149,9 +149,11 @@ class SensorParams:
     def from_toml(cls, text: str, table: str | None = None) -> SensorParams:
         """Parse TOML text; ``table`` names a sub-table (dotted) holding the parameters."""
         try:
-            data: Any = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ParameterError(f"invalid TOML: {exc}") from exc
+            data: Any = tomllib.loads(text.removeprefix("\ufeff"))
+        except RecursionError:
+            raise ParameterError("invalid TOML: arrays or inline tables nested too deeply") from None
+        except ValueError as exc:  # TOMLDecodeError, or an integer of more than 4300 digits
+            raise ParameterError(f"invalid TOML: {str(exc).split(';')[0]}") from None
         if table:
             for key in table.split("."):
                 if not isinstance(data, dict) or key not in data:

@@ -45,23 +45,55 @@ class Frame:
 _FRAME_KEYS: Final = ("sequence", "host_time_s", "channels", "force_n", "resistance_ohm", "status")
 
 
-def decode_json_frame(data: bytes, device: str) -> dict[str, Any]:
-    """A JSON frame, checked for the fields a subscriber uses (``FrameDecodeError`` if not)."""
-    try:
-        fields = json.loads(data)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FrameDecodeError(f"not a JSON frame: {exc}") from None
-    if not isinstance(fields, dict):
-        raise FrameDecodeError("not a JSON frame: not an object")
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _check_json_fields(fields: dict[str, Any]) -> None:
+    """The types a subscriber relies on (printing, contacts, record rows): a frame that has
+    others is refused here, not half-way through the record."""
     missing = [k for k in _FRAME_KEYS if k not in fields]
     if missing:
         raise FrameDecodeError(f"a JSON frame without {', '.join(missing)}")
     seq = fields["sequence"]
     if not isinstance(seq, int) or isinstance(seq, bool) or seq < 0:
-        raise FrameDecodeError(f"a JSON frame with sequence {seq!r}")
+        raise FrameDecodeError(f"a JSON frame with sequence {str(seq)[:40]!r}")
+    for key in ("host_time_s", "device_time_s", "total_force_n"):
+        value = fields.get(key)
+        if value is not None and not _is_number(value):
+            raise FrameDecodeError(f"a JSON frame whose {key} is not a number")
+    if fields["host_time_s"] is None:
+        raise FrameDecodeError("a JSON frame whose host_time_s is not a number")
+    if not isinstance(fields.get("up", True), bool):
+        raise FrameDecodeError("a JSON frame whose up is not true or false")
+    lists = ("channels", "force_n", "resistance_ohm", "status")
+    if not all(isinstance(fields[k], list) for k in lists):
+        raise FrameDecodeError(f"a JSON frame whose {', '.join(lists)} are not all lists")
     n = len(fields["channels"])
-    if any(len(fields[k]) != n for k in ("force_n", "resistance_ohm", "status")):
+    if any(len(fields[k]) != n for k in lists):
         raise FrameDecodeError("a JSON frame whose channel lists differ in length")
+    if not all(isinstance(c, str | int) and not isinstance(c, bool) for c in fields["channels"]):
+        raise FrameDecodeError("a JSON frame whose channel names are not strings")
+    if not all(isinstance(c, str) for c in fields["status"]):
+        raise FrameDecodeError("a JSON frame whose statuses are not strings")
+    for key in ("force_n", "resistance_ohm"):
+        if not all(v is None or _is_number(v) for v in fields[key]):
+            raise FrameDecodeError(f"a JSON frame whose {key} holds values that are not numbers or null")
+
+
+def decode_json_frame(data: bytes, device: str) -> dict[str, Any]:
+    """A JSON frame, checked for the fields a subscriber uses (``FrameDecodeError`` if not:
+    also for JSON Python cannot read, such as arrays nested 100,000 deep or an integer of
+    more than 4300 digits)."""
+    try:
+        fields = json.loads(data)
+    except RecursionError:
+        raise FrameDecodeError("not a JSON frame: nested too deeply") from None
+    except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError, an integer too long
+        raise FrameDecodeError(f"not a JSON frame: {str(exc).split(';')[0][:200]}") from None
+    if not isinstance(fields, dict):
+        raise FrameDecodeError("not a JSON frame: not an object")
+    _check_json_fields(fields)
     fields.setdefault("device", device)
     return fields
 
@@ -173,7 +205,10 @@ class FrameStream:
             meta = json.loads(payload)
             names = [str(c["name"]) for c in meta["channels"]]
             encoding = str(meta.get("encoding", "json"))
-        except (UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError) as exc:
+        except RecursionError:
+            self.stats.undecodable += 1
+            return [], [f"{key[0]}/{key[1]}: an unreadable meta message (nested too deeply)"]
+        except (ValueError, KeyError, TypeError) as exc:  # ValueError: JSON, UTF-8, a long integer
             self.stats.undecodable += 1
             return [], [f"{key[0]}/{key[1]}: an unreadable meta message ({exc!r})"]
         self.stats.meta += 1

@@ -239,6 +239,18 @@ async def test_run_command_serves_reloads_and_stops(tmp_path: Path) -> None:
             cfg.write_text("[[bus]]\nname = 'sim'\nkind = 'carrier-pigeon'\n")
             proc.send_signal(signal.SIGHUP)
             await wait_until(lambda: any("reload failed" in line for line in log), 10, "failed reload logged")
+            # SIGHUP with files Python's TOML parser fails on beyond syntax (issue 24 §1): an
+            # integer of 5,001 digits (ValueError) and arrays nested 500 deep (RecursionError)
+            for hostile, reason in (("1" * 5001, "too long"), ("[" * 500 + "]" * 500, "nested too deeply")):
+                cfg.write_text(f"x = {hostile}\n")
+                proc.send_signal(signal.SIGHUP)
+
+                def failed_or_exited(reason: str = reason) -> bool:
+                    logged = any("reload failed" in line and reason in line for line in log)
+                    return logged or proc.returncode is not None
+
+                await wait_until(failed_or_exited, 10, f"failed reload logged ({reason})")
+                assert proc.returncode is None, "".join(log)
             reads0 = (await scrape())[("tactile_reads_total", (("device", "array1"),))]
             await asyncio.sleep(0.5)
             values = await scrape()
