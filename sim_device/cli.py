@@ -102,6 +102,7 @@ def _transport(tcp: str | None, rtu: str | None, rtu_tcp: str | None, tls: str |
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="tactile-gateway", prog_name="tactile-sim")  # one distribution
 def main() -> None:
     """Simulated MIS tactile sensor arrays (piezoresistive, Kalantari et al.) on Modbus."""
 

@@ -30,6 +30,7 @@ holds (end minus start error, % of full scale) and its parameter count, best fir
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -116,6 +117,18 @@ def kelvin_response(held_n: FloatArray, dt_s: FloatArray, tau_s: float) -> Float
     return out
 
 
+def _line_fit(x: FloatArray, y: FloatArray, rank_deficient: str) -> tuple[float, float]:
+    """Slope and intercept of y on x by least squares; ``ValueError(rank_deficient)`` where
+    x has no usable spread (numpy would only warn, RankWarning, and return a meaningless line)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", np.exceptions.RankWarning)
+        try:
+            slope, intercept = np.polyfit(x, y, 1)
+        except np.exceptions.RankWarning:
+            raise ValueError(rank_deficient) from None
+    return float(slope), float(intercept)
+
+
 def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> StaticCurve:
     """The static curve of ``kind`` through (apparent force, R) rows (finite, F > 0, R > 0)."""
     ok = np.isfinite(force_n) & np.isfinite(resistance_ohm) & (resistance_ohm > 0) & (force_n > 0)
@@ -125,12 +138,12 @@ def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> Sta
     g = 1.0 / r
     if kind == "line":
         # force-space least squares: F = (G - c) / m = alpha G + beta
-        alpha, beta = np.polyfit(g, f, 1)
+        alpha, beta = _line_fit(g, f, "the conductance does not change with force on these rows")
         if not alpha > 0.0:
             raise ValueError("the conductance does not rise with force on these rows")
         return LineCurve(float(1.0 / alpha), float(-beta / alpha))
     if kind == "power_law":
-        n0, lnk0 = np.polyfit(np.log(f), np.log(g), 1)
+        n0, lnk0 = _line_fit(np.log(f), np.log(g), "the forces are too close for a power law")
         if not n0 > 0.0:
             raise ValueError("the conductance does not rise with force on these rows")
         lg = np.log(g)

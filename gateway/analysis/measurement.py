@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -148,6 +149,21 @@ def noise_model(
     return NoiseModel(np.asarray(sigma), np.asarray(q), rel, read_out)
 
 
+def _trend(x: FloatArray, y: FloatArray) -> FloatArray:
+    """The coefficients of a cubic in x through (x, y), of a lower degree where the rows do not
+    determine a cubic (fewer than four distinct x, or x values too close: numpy's RankWarning)."""
+    deg = min(3, int(np.unique(x).size) - 1)
+    while True:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", np.exceptions.RankWarning)
+            try:
+                return np.asarray(np.polyfit(x, y, deg))
+            except np.exceptions.RankWarning:
+                if deg == 0:
+                    raise
+                deg -= 1
+
+
 def estimate_rel_noise(
     force_n: FloatArray, resistance_ohm: FloatArray, quantization_log: FloatArray
 ) -> float:
@@ -156,8 +172,7 @@ def estimate_rel_noise(
     if np.count_nonzero(ok) < 12:
         return 0.01
     lf, lr, q = np.log(force_n[ok]), np.log(resistance_ohm[ok]), quantization_log[ok]
-    deg = 3 if np.ptp(lf) > 0 else 0
-    u = lr - np.polyval(np.polyfit(lf, lr, deg), lf)
+    u = lr - np.polyval(_trend(lf, lr), lf)
     z = u[:-2] - 2.0 * u[1:-1] + u[2:]
     qz = q[1:-1]
     calm = qz <= np.percentile(qz, 50)

@@ -2,27 +2,23 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
+import io
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..atomic import atomic_write_bytes
 from ..model import SensorModel
 
 
 def save_figure(fig: Any, path: Path) -> Path:
-    """Save a matplotlib figure through a temporary file and an atomic rename."""
+    """Save a matplotlib figure atomically, with the permission bits a CSV written beside it
+    gets (``atomic_write_bytes``: a new file 0666 minus the umask, a replaced one keeps its)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".png")
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110)
+    atomic_write_bytes(path, buffer.getvalue())
     return path
 
 

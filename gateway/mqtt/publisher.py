@@ -6,7 +6,9 @@ paho client: it connects (TLS, user and password), drives the network loop, turn
 snapshots into frames (``payload``) and publishes them. When the broker is slow or gone the
 queue fills and its oldest frames are dropped and counted; the thread reconnects after a
 jittered back-off (uniform in ``[0, b]``, b doubling from 0.5 s to 30 s). Sequence numbers
-count the polls of a device, so a subscriber sees a dropped frame as a gap.
+count the polls of a device, so a subscriber sees a dropped frame as a gap. Nothing is
+published for a device before its first poll completes (sequence 1 is that poll; a failed
+first poll is published, ``up`` false).
 
 Topics (``docs/mqtt.md``): ``<prefix>/<gateway>/status`` (``online``/``offline``, retained,
 ``offline`` as the last will), ``<prefix>/<gateway>/<device>/meta`` (retained: channels,
@@ -126,6 +128,8 @@ class MqttPublisher:
                 if self._last.get(name) is dev:
                     continue
                 self._last[name] = dev
+                if not dev.polled:
+                    continue  # listed before its first poll completed: no observation, no frame
                 seq = self._seq.get(name, 0) + 1
                 self._seq[name] = seq
                 if rate > 0 and now - self._last_sent.get(name, -1e300) < 1.0 / rate:

@@ -344,12 +344,18 @@ class BusWorker:
                 where,
             )
 
+    def _unprefixed(self, message: str) -> str:
+        """``message`` without the ``bus 'NAME': `` the transport's errors start with, for a
+        log line that already names the bus."""
+        prefix = f"bus {self.name!r}: "
+        return message[len(prefix) :] if message.startswith(prefix) else message
+
     def _fail(self, runner: DeviceRunner, exc: BaseException) -> None:
         runner.failures += 1
         runner.next_attempt = self._mono() + self._jitter(runner.failures)
         message = str(exc)
         if message != runner.last_error:
-            log.warning("device %s on bus %s: %s", runner.config.name, self.name, message)
+            log.warning("device %s on bus %s: %s", runner.config.name, self.name, self._unprefixed(message))
         runner.last_error = message
         snap, runner.state = runner.processor.stale(runner.state, self._wall(), message)
         self._publish(runner, snap)
@@ -366,7 +372,9 @@ class BusWorker:
                 runner.tally.error("connection")
                 self._fail_quiet(runner, exc)
             if self.connect_failures == 1 or math.log2(self.connect_failures).is_integer():
-                log.warning("bus %s: %s (attempt %d)", self.name, exc, self.connect_failures)
+                log.warning(
+                    "bus %s: %s (attempt %d)", self.name, self._unprefixed(str(exc)), self.connect_failures
+                )
             return False
         if self.connect_failures:
             log.info("bus %s: reconnected after %d failed attempts", self.name, self.connect_failures)

@@ -152,7 +152,8 @@ class Poller:
         self.holder.publish(GatewaySnapshot.build(self._devices, self._counters, self._sequence))
 
     def _seed_snapshots(self) -> None:
-        """Before the first poll every device is listed as stale (never polled)."""
+        """Before the first poll every device is listed as stale, marked ``polled=False``: a
+        placeholder, not an observation (the stream and MQTT do not publish it)."""
         names = {r.config.name for r in self.runners()}
         for name in list(self._devices):
             if name not in names:
@@ -161,10 +162,10 @@ class Poller:
         for runner in self.runners():
             if runner.config.name not in self._devices:
                 snap, runner.state = runner.processor.stale(runner.state, self._wall(), "not polled yet")
-                self._devices[runner.config.name] = snap
+                self._devices[runner.config.name] = replace(snap, polled=False)
             elif runner.state.last is None:
                 snap, _ = runner.processor.stale(runner.state, self._wall(), "not polled yet")
-                self._devices[runner.config.name] = snap
+                self._devices[runner.config.name] = replace(snap, polled=False)
             else:
                 # the last values stand until the next poll, but what the configuration says
                 # (interval, bus) is the new configuration's from the moment it is in force

@@ -178,6 +178,9 @@ class DeviceSnapshot:
     time_source: str = "host"  # what timed the creep step of this poll: "device" or "host"
     clock_faults: tuple[tuple[str, int], ...] = ()  # device clock faults by kind: stuck, backwards
     clock_fallback: str | None = None  # why the host clock times a device whose map has a clock
+    #: False only for the placeholder a device is listed with before its first poll completes
+    #: (no observation: the stream and MQTT publish nothing for it; a failed poll is True)
+    polled: bool = True
 
     @property
     def n_channels(self) -> int:

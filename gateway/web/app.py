@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 import time
 from collections.abc import Callable
 from importlib import resources
@@ -132,7 +133,7 @@ class WebPage:
             return None
         out = layout_json(entry.snapshot, self.scale_max_n)
         out.update(
-            up=entry.snapshot.up,
+            up=entry.snapshot.up if entry.seq else None,  # None: no poll of it has completed yet
             seq=entry.seq,
             stream_frames_dropped_total=self.hub.dropped_total.get(name, 0),
         )
@@ -157,6 +158,10 @@ class WebPage:
         entry = self.hub.latest(request.match_info["name"])
         if entry is None:
             raise web.HTTPNotFound()
+        if entry.seq == 0:  # no poll of it has completed yet: no frame, and not an outage
+            retry = str(max(1, math.ceil(entry.snapshot.poll_interval_s)))
+            raise web.HTTPServiceUnavailable(text="no poll of this device has completed yet\n",
+                                             headers={"Retry-After": retry})  # fmt: skip
         body = encode_frame(entry.snapshot, entry.seq, entry.counters)
         return web.Response(body=body, headers={"Content-Type": "application/json"})
 
@@ -205,7 +210,8 @@ class WebPage:
         wake = asyncio.Event()
         p = self.hub.open_page(wanted, self.max_fps, wake.set)
         for entry in self.hub.devices():  # draw at once, then follow
-            p.offer(entry.snapshot.device, encode_frame(entry.snapshot, entry.seq, entry.counters))
+            if entry.seq:  # a device whose first poll has not completed has no frame yet
+                p.offer(entry.snapshot.device, encode_frame(entry.snapshot, entry.seq, entry.counters))
         resp = web.StreamResponse(headers=_SSE_HEADERS)
         try:
             await self._open_events(resp, request)

@@ -3,7 +3,10 @@
 The poller publishes a ``GatewaySnapshot`` after each device poll (in its own thread and
 loop); ``FrameHub.on_snapshot`` only notes which device changed, numbers that poll (a per-
 device sequence from 1) and hands it to the server's loop through a bounded inbox, waking
-that loop at most once per batch. In the server's loop ``drain`` encodes each frame once and
+that loop at most once per batch. A device's placeholder before its first poll completes
+(``DeviceSnapshot.polled`` false) is listed with ``seq`` 0 but is not a frame: nothing is
+sent for a device until a poll of it has completed (a failed first poll is sent, ``up``
+false). In the server's loop ``drain`` encodes each frame once and
 offers it to the clients:
 
 * ``StreamQueue``: every frame of one device for a program, bounded; when full the oldest
@@ -118,7 +121,8 @@ class PageQueue:
 
 @dataclass(frozen=True)
 class Latest:
-    """The newest poll of one device as the hub last saw it."""
+    """The newest poll of one device as the hub last saw it (``seq`` 0: no poll of it has
+    completed yet, so it has no frame; the snapshot only gives its layout)."""
 
     seq: int
     snapshot: DeviceSnapshot
@@ -155,7 +159,13 @@ class FrameHub:
                 old = self._latest.get(name)
                 if old is not None and old.snapshot is dev:
                     continue
-                entry = Latest(1 if old is None else old.seq + 1, dev, snap.counters.get(name))
+                if not dev.polled:
+                    # a placeholder before the first poll completes: listed (seq 0), never a
+                    # frame, and it does not replace what a finished poll said
+                    if old is None or old.seq == 0:
+                        self._latest[name] = Latest(0, dev, snap.counters.get(name))
+                    continue
+                entry = Latest(old.seq + 1 if old is not None else 1, dev, snap.counters.get(name))
                 self._latest[name] = entry
                 if self._schedule is not None:
                     if len(self._inbox) >= self.inbox_capacity:

@@ -127,7 +127,7 @@ class Exported:
 
     def __call__(self, snapshot: GatewaySnapshot) -> None:
         dev = snapshot.devices.get("arr")
-        if dev is not None and dev is not self._last:
+        if dev is not None and dev is not self._last and getattr(dev, "polled", True):
             self._last = dev
             self.by_seq[len(self.by_seq) + 1] = dev
 
@@ -165,6 +165,38 @@ async def test_every_frame_arrives_in_order_with_the_exported_values(tmp_path: P
     meta = json.loads(sub.of("/arr/meta")[0])
     assert [c["name"] for c in meta["channels"]] == ["ch00", "ch01", "ch02", "ch03"]
     assert meta["units"]["force"] == "N" and meta["profile"] == "profile 'tactile-sim'"
+
+
+async def _first_frames(tmp_path: Path, broker: Broker, sim_port: int, n: int) -> list[dict[str, Any]]:
+    """The first ``n`` frames of device "arr" as a subscriber connected before the gateway
+    started sees them."""
+    config = load_config(_config(tmp_path, sim_port, broker.port))
+    sub = Subscriber(broker.port, ["lab/tactile/gw1/arr/frame"])
+    holder = SnapshotHolder()
+    publisher = MqttPublisher(config)
+    holder.subscribe(publisher.on_snapshot)
+    publisher.start()
+    try:
+        async with Poller(config, holder):
+            assert await until(lambda: len(sub.of("/frame")) >= n, 20.0)
+    finally:
+        publisher.stop()
+        sub.close()
+    return [json.loads(p) for p in sub.of("/frame")[:n]]
+
+
+async def test_the_first_frame_is_the_first_poll_not_a_fake_outage(tmp_path: Path, broker: Broker) -> None:
+    async with serve_tcp([_array()], host="127.0.0.1", port=0) as server:
+        frames = await _first_frames(tmp_path, broker, server.port, 3)
+    assert [f["sequence"] for f in frames] == [1, 2, 3]
+    for f in frames:  # nothing is published before the first poll completes
+        assert f["up"] is True and "stale" not in f["status"], f
+
+
+async def test_a_device_that_fails_its_first_poll_is_published_down(tmp_path: Path, broker: Broker) -> None:
+    frames = await _first_frames(tmp_path, broker, free_port(), 1)  # nothing listens there
+    assert frames[0]["sequence"] == 1
+    assert frames[0]["up"] is False and set(frames[0]["status"]) == {"stale"}
 
 
 async def test_a_broker_restart_loses_only_the_counted_frames(tmp_path: Path, broker: Broker) -> None:

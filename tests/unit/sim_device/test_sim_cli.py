@@ -64,3 +64,15 @@ def test_short_run_with_recording(tmp_path: Path) -> None:
     header = next(i for i, line in enumerate(lines) if not line.startswith("#"))
     assert lines[header] == "time_s,channel,resistance_ohm,force_n,temperature_c"
     assert len(lines) - header - 1 >= 4 * 5
+
+
+def test_version_is_the_distribution_version_like_the_gateway() -> None:
+    from importlib.metadata import version
+
+    from gateway.cli import main as gateway_main
+
+    result = CliRunner().invoke(main, ["--version"])
+    assert result.exit_code == 0, result.output
+    assert result.output == f"tactile-sim, version {version('tactile-gateway')}\n"
+    gw = CliRunner().invoke(gateway_main, ["--version"])
+    assert gw.output.split(", ")[1] == result.output.split(", ")[1]

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -140,3 +142,22 @@ def test_out_never_replaces_an_input_nor_goes_into_a_missing_folder(
     assert rec.read_text() == before
     result = CliRunner().invoke(main, ["apply", str(cal), str(rec), "--out", str(tmp_path / "no" / "o.csv")])
     assert result.exit_code == 2 and "directory" in result.output and "does not exist" in result.output
+
+
+def test_the_plot_gets_the_permission_bits_of_the_csv_beside_it(
+    tmp_path: Path, files: tuple[Path, Path]
+) -> None:
+    # PNGs were written 0600 (a private temporary file renamed) while the CSVs were 0644
+    cal, rec = files
+    out, png = tmp_path / "out.csv", tmp_path / "out.png"
+    old = os.umask(0o022)
+    try:
+        result = CliRunner().invoke(
+            main, ["apply", str(cal), str(rec), "--out", str(out), "--plot", str(png)]
+        )
+    finally:
+        os.umask(old)
+    assert result.exit_code == 0, result.output
+    assert stat.S_IMODE(out.stat().st_mode) == 0o644
+    assert stat.S_IMODE(png.stat().st_mode) == 0o644
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary file left

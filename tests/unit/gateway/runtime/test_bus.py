@@ -216,3 +216,16 @@ async def test_after_a_reload_the_published_snapshot_has_the_new_interval_at_onc
     snap = latest(poller)
     assert snap.poll_interval_s == 0.25
     assert snap.up and snap.force_n.tolist() == pytest.approx(SPEC_FORCES_N, rel=5e-3)  # values stand
+
+
+async def test_a_failed_connect_names_the_bus_once_in_the_log(caplog: pytest.LogCaptureFixture) -> None:
+    # was "bus line: bus 'line': cannot connect to ..."
+    poller, worker, _, vt, _ = setup(device_image())
+    vt.refuse_connects = 1
+    with caplog.at_level("WARNING", logger="gateway.runtime.bus"):
+        await worker.poll_cycle()
+    lines = [r.getMessage() for r in caplog.records if "cannot connect" in r.getMessage()]
+    assert lines, caplog.text
+    assert lines == ["bus line: cannot connect to virtual bus 'line': connection refused (attempt 1)"]
+    assert "cannot connect" in (latest(poller).error or "")  # the snapshot keeps the whole message
+    await worker.close()

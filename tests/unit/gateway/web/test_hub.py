@@ -4,12 +4,17 @@ and visible as gaps, pages newest-frame-wins at a capped rate; no clock, no slee
 from __future__ import annotations
 
 import json
+import random
 from collections.abc import Callable
 
 import pytest
 from web_snapshots import device, gateway
 
-from gateway.runtime.poller import SnapshotHolder
+from gateway.config import bus_config_for, device_config_for, gateway_config_for
+from gateway.modbus.virtual import VirtualDevice, VirtualTransport
+from gateway.model import SensorParams
+from gateway.runtime.poller import Poller, SnapshotHolder
+from gateway.runtime.snapshot import ChannelStatus
 from gateway.web.hub import FrameHub, PageQueue, StreamQueue
 
 
@@ -142,3 +147,50 @@ def test_closing_ends_every_client() -> None:
     assert hub.clients() == (1, 1)
     hub.close_all()
     assert s.closed and p.closed and sorted(woken) == ["p", "s"] and hub.clients() == (0, 0)
+
+
+def _polled_poller(fail_first: bool) -> Poller:
+    """A 4-channel device on the in-process virtual bus (whose first poll fails if asked)."""
+    dev = VirtualDevice()
+    dev.set_input(2, [0, 0, 0, 1234])
+    dev.set_input(16, [0] * 33)
+    dev.set_input(100, [4413, 6314, 11518, 32800])
+    device_cfg = device_config_for("arr", 1, [SensorParams()] * 4, 2, 2.5)
+    bus = bus_config_for("line", "tcp", [device_cfg], host="127.0.0.1", port=502, retries=1,
+                         backoff_initial_s=0.1, backoff_max_s=2.0, timeout_s=0.2)  # fmt: skip
+    vt = VirtualTransport("line", {1: dev}, timeout_s=0.2)
+    if fail_first:
+        vt.fail_next("timeout", times=10)
+    return Poller(gateway_config_for([bus]), transport_factory=lambda _bus: vt, rng=random.Random(7),
+                  wall_clock=lambda: 1_700_000_000.0)  # fmt: skip
+
+
+async def test_nothing_is_streamed_for_a_device_before_its_first_poll_completes() -> None:
+    # sequence 1 is the first poll, not a stale "outage" published at start
+    poller = _polled_poller(fail_first=False)
+    hub, sched = FrameHub(poller.holder), Scheduled()
+    hub.attach(sched)
+    q = hub.open_stream("arr")
+    page = hub.open_page(None, max_fps=1000.0)
+    await poller.poll_once()
+    sched.run()
+    frames = [json.loads(f) for _, f in q.take()]
+    assert [f["seq"] for f in frames] == [1]
+    assert frames[0]["up"] is True and ChannelStatus.STALE not in frames[0]["status"]
+    assert [json.loads(f)["seq"] for f in page.take(0.0)] == [1]
+    assert q.dropped == 0 and hub.latest("arr").seq == 1  # type: ignore[union-attr]
+    hub.close_all()
+
+
+async def test_a_device_that_fails_its_first_poll_is_streamed_as_down() -> None:
+    poller = _polled_poller(fail_first=True)
+    hub, sched = FrameHub(poller.holder), Scheduled()
+    hub.attach(sched)
+    q = hub.open_stream("arr")
+    await poller.poll_once()
+    sched.run()
+    frames = [json.loads(f) for _, f in q.take()]
+    assert [f["seq"] for f in frames] == [1]
+    assert frames[0]["up"] is False and frames[0]["status"] == [ChannelStatus.STALE] * 4
+    assert frames[0]["error"] and "not polled yet" not in frames[0]["error"]
+    hub.close_all()
