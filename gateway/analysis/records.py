@@ -81,7 +81,8 @@ class Record:
                 return next(iter(self.channels.values()))
             names = ", ".join(self.channels)
             raise RecordError(
-                f"{self._where()}: the record has {len(self.channels)} channels ({names}); choose one"
+                f"{self._where()}: the record has {len(self.channels)} channels ({names}); "
+                "choose one with --channel NAME"
             )
         if name not in self.channels:
             import difflib

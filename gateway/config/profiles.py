@@ -16,7 +16,9 @@ from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
+from .readout import DIVIDER_KEYS, LAYOUT_KEYS
 from .tables import Context, Table, parse_toml, read_text_file, suggest
+from .wire import CHECK_KEYS, REGISTER_KEYS
 
 __all__ = ["MERGED_TABLES", "PROFILE_KEYS", "builtin_profiles", "load_profile", "merge_profile"]
 
@@ -38,6 +40,16 @@ PROFILE_KEYS: Final = (
 #: Tables merged key by key with the device's own.
 MERGED_TABLES: Final = ("registers", "clock", "front_end", "layout", "checks", "model")
 _SUFFIX: Final = ".toml"
+#: The profile's tables whose keys do not depend on a kind: an unknown key in one of them (e.g.
+#: ``clock = ...`` written after ``[registers]``, so TOML puts it in that table) is named with
+#: the profile's file, not the configuration that names the profile.
+_FIXED_KEY_TABLES: Final = (
+    ("registers", REGISTER_KEYS, "[registers]"),
+    ("layout", LAYOUT_KEYS, "[layout]"),
+    ("checks", CHECK_KEYS, "[checks]"),
+    ("divider", DIVIDER_KEYS, "[divider]"),
+    ("model", ("effects", "params"), "[model]"),
+)
 
 
 def builtin_profiles() -> dict[str, str]:
@@ -85,7 +97,9 @@ def load_profile(ctx: Context, key_path: str, reference: str) -> tuple[str, dict
         label = f"profile {str(file)!r}"
         profile_ctx = Context(file)
     data = parse_toml(profile_ctx, text, "device profile")
-    Table(profile_ctx, data, "", PROFILE_KEYS)  # unknown keys, named in the profile's own file
+    table = Table(profile_ctx, data, "", PROFILE_KEYS)  # unknown keys, named in the profile's own file
+    for key, allowed, header in _FIXED_KEY_TABLES:
+        table.table(key, allowed, header)
     return label, data
 
 

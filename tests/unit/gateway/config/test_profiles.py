@@ -504,3 +504,13 @@ def test_a_calibration_baseline_out_of_range_is_refused(tmp_path: Path, value: s
     assert message.startswith(f"{cal}: channel.ch03.baseline_ohm: ")
     assert "allowed: (0, inf) ohm" in message
     assert f"(calibration file of {DEV}.calibration in {tmp_path / 'gateway.toml'})" in message
+
+
+def test_a_key_after_a_table_header_is_named_in_the_profile_file(tmp_path: Path) -> None:
+    # docs/profiles.md once printed clock = ... after [registers]: TOML puts it in that table
+    profile = tmp_path / "board.toml"
+    profile.write_text(
+        'channels = 4\n[registers]\nadc_address = 0\nclock = { address = 10, registers = 2, unit = "ms" }\n'
+    )
+    message = refusal('profile = "board.toml"\n', tmp_path / "gateway.toml")
+    assert message.startswith(f"{profile}: registers.clock: unknown key"), message
