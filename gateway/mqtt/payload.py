@@ -7,6 +7,11 @@ static force (N), the resistance (ohm) and the status. Absent values are ``null`
 NaN in the binary layout. ``docs/mqtt.md`` documents both; ``decode_binary`` reads the binary
 layout back into the same dictionary ``frame_dict`` builds.
 
+Every float of a frame is rounded to ``DECIMALS`` (6) decimals, as the page's frames are: 1 µN,
+1 µΩ, 1 µs, 1 µm² and 1 nm are far below what a tactile channel or a clock resolves, and no
+binary float noise (``15.620000000000001``) reaches a subscriber. Rounding to decimals, not
+to significant digits, keeps the Unix time to the microsecond.
+
 Binary layout (little-endian, ``BINARY_VERSION`` 1)::
 
     offset  type       field
@@ -42,6 +47,7 @@ __all__ = ["BINARY_MAGIC", "FrameDecodeError", "decode_binary", "encode_binary",
 
 BINARY_MAGIC: Final = b"TGF1"
 _HEADER: Final = struct.Struct("<4sQdddddd HH")
+DECIMALS: Final = 6
 
 
 class FrameDecodeError(GatewayError):
@@ -56,23 +62,38 @@ def _values(array: Any) -> list[float | None]:
     return finite_or_none(np.asarray(array, dtype=np.float64))
 
 
+def _num(value: float) -> float:
+    """A published float: rounded to ``DECIMALS`` (finite values only reach here)."""
+    return round(float(value), DECIMALS)
+
+
+def _opt_num(value: float | None) -> float | None:
+    v = _opt(value)
+    return None if v is None else round(v, DECIMALS)
+
+
+def _num_values(array: Any) -> list[float | None]:
+    return finite_or_none(np.asarray(array, dtype=np.float64), DECIMALS)
+
+
 def frame_dict(snapshot: DeviceSnapshot, sequence: int) -> dict[str, Any]:
-    """One poll of a device as the frame's fields (JSON-ready: no NaN, None for absent)."""
+    """One poll of a device as the frame's fields (JSON-ready: no NaN, None for absent; every
+    float rounded to ``DECIMALS`` decimals)."""
     cop = snapshot.center_of_pressure_mm
     return {
         "sequence": int(sequence),
         "device": snapshot.device,
-        "host_time_s": float(snapshot.timestamp_s),
-        "device_time_s": _opt(snapshot.device_time_s),
+        "host_time_s": _num(snapshot.timestamp_s),
+        "device_time_s": _opt_num(snapshot.device_time_s),
         "up": bool(snapshot.up),
-        "total_force_n": float(snapshot.total_force_n),
-        "center_of_pressure_mm": None if cop is None else [float(cop[0]), float(cop[1])],
-        "contact_area_mm2": float(snapshot.contact_area_mm2),
+        "total_force_n": _num(snapshot.total_force_n),
+        "center_of_pressure_mm": None if cop is None else [_num(cop[0]), _num(cop[1])],
+        "contact_area_mm2": _num(snapshot.contact_area_mm2),
         "channels_in_contact": int(snapshot.channels_in_contact),
         "channels": list(snapshot.channel_names),
-        "force_n": _values(snapshot.force_n),
-        "force_static_n": _values(snapshot.force_static_n),
-        "resistance_ohm": _values(snapshot.resistance_ohm),
+        "force_n": _num_values(snapshot.force_n),
+        "force_static_n": _num_values(snapshot.force_static_n),
+        "resistance_ohm": _num_values(snapshot.resistance_ohm),
         "status": [STATUS_LABELS[int(s)] for s in snapshot.status],
     }
 

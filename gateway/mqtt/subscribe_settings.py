@@ -1,12 +1,17 @@
 """Which broker and which frames ``tactile-gateway subscribe`` receives: the broker address,
-the password file, and the topic filters (``docs/mqtt.md``). Pure: no network.
+the password file, the topic filters and the session (a fixed client id and how long the
+broker keeps the session of a lost subscriber; ``docs/mqtt.md``). Pure: no network.
 """
 
 from __future__ import annotations
 
+import hashlib
+import re
+import socket
 import stat
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Final
 
 from ..config.mqtt import check_topic_level
 from ..errors import ConfigError
@@ -55,6 +60,19 @@ def read_password_file(path: Path) -> str:
     return text.splitlines()[0] if text else ""
 
 
+SESSION_EXPIRY_S: Final = 3600
+CLIENT_ID_MAX: Final = 64
+
+
+def default_client_id(prefix: str, gateway: str, device: str, share_group: str | None, host: str = "") -> str:
+    """A client id fixed for this host and these topic filters, so a restarted ``subscribe``
+    (or the same one after a lost connection) finds its session again:
+    ``tactile-sub-<host>-<8 hex of the filters>``."""
+    host = re.sub(r"[^A-Za-z0-9-]", "-", host or socket.gethostname())[:32] or "host"
+    filters = "\0".join([prefix, gateway, device, share_group or ""])
+    return f"tactile-sub-{host}-{hashlib.sha256(filters.encode()).hexdigest()[:8]}"
+
+
 def _filter_level(where: str, value: str) -> str:
     if value == "+":
         return value
@@ -75,7 +93,8 @@ class SubscribeSettings:
     gateway: str = "+"
     device: str = "+"
     share_group: str | None = None
-    client_id: str = ""
+    client_id: str = ""  # "" : ``default_client_id`` of the filters and this host
+    session_expiry_s: int = SESSION_EXPIRY_S  # how long the broker keeps the session of a lost client
 
     def __post_init__(self) -> None:
         check_topic_level("--prefix", self.prefix, allow_slash=True)
@@ -83,6 +102,15 @@ class SubscribeSettings:
         _filter_level("--device", self.device)
         if self.share_group is not None:
             check_topic_level("--share", self.share_group, allow_slash=False)
+        if not self.client_id:
+            cid = default_client_id(self.prefix, self.gateway, self.device, self.share_group)
+            object.__setattr__(self, "client_id", cid)
+        elif len(self.client_id) > CLIENT_ID_MAX or not self.client_id.isprintable():
+            raise ConfigError(
+                f"--client-id: {self.client_id!r} is not 1..{CLIENT_ID_MAX} printable characters"
+            )
+        if not 0 <= self.session_expiry_s <= 0xFFFFFFFF:
+            raise ConfigError(f"--session-expiry: {self.session_expiry_s} s is not in 0..4294967295")
 
     def topics(self) -> list[str]:
         """The topic filters, meta first: the broker sends retained messages on subscribing.

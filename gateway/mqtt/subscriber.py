@@ -12,6 +12,11 @@ rows (``docs/record-format.md``; the CLI owns the writer).
 ``run_subscriber`` drives a paho client in the calling thread (no network thread to leak):
 it connects, waits for the broker's answer, subscribes, and passes every message to a
 callback until told to stop; a connection lost later is re-established with back-off.
+The session is persistent (MQTT 5: a fixed client id, clean start off, a session expiry,
+QoS 1 subscriptions): the broker queues the frames published while the subscriber is away
+(a lost connection, a broker restart with persistence, a killed subscriber) and delivers
+them when it comes back. A deliberate end (``should_stop``) ends the session, so the next
+run does not start with an old backlog.
 Every failure to connect (refused, unknown host, TLS, credentials, no answer) is a
 ``SubscribeError`` with a one-line message.
 
@@ -31,6 +36,8 @@ from typing import Any, Final
 
 import paho.mqtt.client as mqtt
 from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
 
 from ..errors import GatewayError
 from .frame_rows import frame_clock_s, in_contact, recordable
@@ -100,13 +107,21 @@ class _Session:
         self.connack: str | None = None  # None: no answer yet; "" accepted; else the refusal
         self.subscribed = False
         self.suback_error: str | None = None
+        self.session_present = False
+        self.disconnect_reason: str | None = None
 
     def connect(self, client: mqtt.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
         if getattr(reason, "is_failure", False):
             self.connack = _reason_text(reason)
             return
         self.connack = ""
+        self.session_present = bool(getattr(flags, "session_present", False))
+        # subscribed again even on a resumed session: harmless (the same filters, QoS 1), and
+        # it brings the retained meta messages again
         client.subscribe([(t, 1) for t in self.settings.topics()])
+
+    def disconnect(self, client: mqtt.Client, userdata: Any, flags: Any, reason: Any, props: Any) -> None:
+        self.disconnect_reason = _reason_text(reason) if getattr(reason, "is_failure", False) else None
 
     def subscribe(self, client: mqtt.Client, userdata: Any, mid: int, codes: Any, props: Any) -> None:
         refused = [c for c in codes if getattr(c, "is_failure", False)]
@@ -124,8 +139,7 @@ def _make_client(
     client = factory(
         callback_api_version=CallbackAPIVersion.VERSION2,
         client_id=settings.client_id,
-        protocol=MQTTProtocolVersion.MQTTv311,
-        clean_session=True,
+        protocol=MQTTProtocolVersion.MQTTv5,
         reconnect_on_failure=False,
     )
     if settings.username is not None:
@@ -138,15 +152,29 @@ def _make_client(
     client.on_connect = session.connect
     client.on_subscribe = session.subscribe
     client.on_message = session.message
+    client.on_disconnect = session.disconnect
     return client
+
+
+def _session_expiry(seconds: int, packet: int) -> Properties:
+    props = Properties(packet)
+    props.SessionExpiryInterval = seconds
+    return props
 
 
 def _establish(client: mqtt.Client, session: _Session, should_stop: Callable[[], bool]) -> bool:
     """Connect and subscribe; False if told to stop first. ``SubscribeError`` on failure."""
     settings = session.settings
     session.connack, session.subscribed, session.suback_error = None, False, None
+    session.session_present, session.disconnect_reason = False, None
     try:
-        client.connect(settings.host, settings.port, keepalive=30)
+        client.connect(
+            settings.host,
+            settings.port,
+            keepalive=30,
+            clean_start=False,
+            properties=_session_expiry(settings.session_expiry_s, PacketTypes.CONNECT),
+        )
     except (OSError, ValueError, ssl.SSLError) as exc:
         raise _connect_error(settings, exc) from None
     deadline = time.monotonic() + CONNECT_TIMEOUT_S
@@ -195,7 +223,11 @@ def run_subscriber(
 ) -> None:
     """Receive until ``should_stop()``; messages go to ``on_message(topic, payload)`` in this
     thread. A failure to connect the first time is a ``SubscribeError``; a connection lost
-    later is re-established (``notice`` says so; the frames in between show as a gap)."""
+    later is re-established (``notice`` says so). The broker keeps the session meanwhile and
+    delivers what was published while the subscriber was away; where it kept none (a restart
+    without persistence, an expired session) ``notice`` says so and the frames in between
+    show as a gap. Another client taking over the session (the same client id) is a
+    ``SubscribeError``: two subscribers would otherwise throw each other out for ever."""
     session = _Session(settings, on_message)
     client = _make_client(settings, session, client_factory)
     rng = rng or random.Random()
@@ -207,6 +239,12 @@ def run_subscriber(
             rc = client.loop(timeout=LOOP_TIMEOUT_S)
             if rc == mqtt.MQTT_ERR_SUCCESS:
                 continue
+            if session.disconnect_reason == "Session taken over":
+                raise SubscribeError(
+                    f"another client connected to {settings.where()} with the client id "
+                    f"{settings.client_id!r} and took over its session: "
+                    "give each subscriber its own client id"
+                )
             notice(f"lost the connection to {settings.where()} ({mqtt.error_string(rc)}); reconnecting")
             while not should_stop():
                 if _wait(rng.uniform(0.0, backoff), should_stop):
@@ -214,6 +252,11 @@ def run_subscriber(
                 try:
                     if _establish(client, session, should_stop):
                         notice(f"reconnected to {settings.where()}")
+                        if not session.session_present:
+                            notice(
+                                f"the broker kept no session for {settings.client_id!r} (restarted without "
+                                "persistence, or the session expired): frames published meanwhile are lost"
+                            )
                         backoff = BACKOFF_INITIAL_S
                     break
                 except SubscribeError as exc:
@@ -223,7 +266,9 @@ def run_subscriber(
                     notice(f"{exc}; retrying")
     finally:
         if session.connack == "":
-            client.disconnect()
+            # a deliberate end ends the session (expiry 0); an error keeps it for the next run
+            ending = should_stop()
+            client.disconnect(properties=_session_expiry(0, PacketTypes.DISCONNECT) if ending else None)
             for _ in range(20):  # write the DISCONNECT packet; loop() fails once the socket is closed
                 if client.loop(timeout=LOOP_TIMEOUT_S) != mqtt.MQTT_ERR_SUCCESS:
                     break

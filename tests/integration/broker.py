@@ -1,5 +1,6 @@
 """A real Mosquitto broker for tests: ephemeral loopback port, optional password file and TLS,
-persistence in the test's folder (so a restart keeps sessions and queued QoS 1 messages)."""
+persistence in the test's folder (so a restart keeps sessions and queued QoS 1 messages; saved
+every second and on a clean stop), or none (``persistence=False``: a restart forgets them)."""
 
 from __future__ import annotations
 
@@ -47,12 +48,14 @@ class Broker:
     tls: dict[str, Path] | None = None
     port: int = field(default_factory=free_port)
     process: subprocess.Popen[bytes] | None = None
+    # False: a restart forgets sessions and queued messages (mosquitto's default)
+    persistence: bool = True
 
     def _config(self) -> Path:
         self.folder.mkdir(parents=True, exist_ok=True)
         lines = [
             f"listener {self.port} 127.0.0.1",
-            "persistence true",
+            f"persistence {'true' if self.persistence else 'false'}",
             f"persistence_location {self.folder}/",
             "autosave_interval 1",
             f"log_dest file {self.folder / 'mosquitto.log'}",

@@ -158,8 +158,9 @@ async def test_every_frame_arrives_in_order_with_the_exported_values(tmp_path: P
     assert stats.dropped.get("arr", 0) == 0 and stats.published["arr"] == len(frames)
     for f in frames:
         snap = exported.by_seq[f["sequence"]]
-        expected = [None if not np.isfinite(v) else float(v) for v in snap.force_n]
-        assert f["force_n"] == expected and f["device_time_s"] == snap.device_time_s
+        # published rounded to 6 decimals (docs/mqtt.md), exactly those values
+        expected = [None if not np.isfinite(v) else round(float(v), 6) for v in snap.force_n]
+        assert f["force_n"] == expected and f["device_time_s"] == round(snap.device_time_s, 6)
         assert f["channels"] == list(snap.channel_names)
     assert sub.of("/status")[-1] == b"offline"  # said on a clean stop
     meta = json.loads(sub.of("/arr/meta")[0])

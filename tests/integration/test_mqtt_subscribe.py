@@ -40,14 +40,25 @@ def tls_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return make_tls_files(tmp_path_factory.mktemp("tls"))
 
 
-@pytest.fixture
-def broker(tmp_path: Path, tls_files: dict[str, Path]) -> Iterator[Broker]:
-    b = Broker(tmp_path / "broker", users={"gw": PASSWORD, "reader": PASSWORD}, tls=tls_files)
+def _broker(folder: Path, tls_files: dict[str, Path], persistence: bool) -> Iterator[Broker]:
+    b = Broker(folder, users={"gw": PASSWORD, "reader": PASSWORD}, tls=tls_files, persistence=persistence)
     b.start()
     try:
         yield b
     finally:
         b.stop()
+
+
+@pytest.fixture
+def broker(tmp_path: Path, tls_files: dict[str, Path]) -> Iterator[Broker]:
+    """With persistence in the test's folder: a restart keeps sessions and queued messages."""
+    yield from _broker(tmp_path / "broker", tls_files, persistence=True)
+
+
+@pytest.fixture
+def volatile_broker(tmp_path: Path, tls_files: dict[str, Path]) -> Iterator[Broker]:
+    """Without persistence: a restart forgets every session."""
+    yield from _broker(tmp_path / "broker", tls_files, persistence=False)
 
 
 def _secret(path: Path, text: str) -> Path:
@@ -101,18 +112,26 @@ class Exported:
 
     def __call__(self, snapshot: GatewaySnapshot) -> None:
         dev = snapshot.devices.get("arr")
-        if dev is not None and dev is not self._last:
+        # nothing is published for a device before its first poll completes
+        if dev is not None and dev is not self._last and getattr(dev, "polled", True):
             self._last = dev
             self.by_seq[len(self.by_seq) + 1] = dev
 
 
+def _f32(value: float) -> float:
+    """A published value as a binary frame carries it: rounded to 6 decimals, then float32."""
+    v = float(value)
+    return float(np.float32(round(v, 6) if math.isfinite(v) else v))
+
+
 def _expected_rows(snap: Any) -> dict[str, float]:
-    """What the record format allows for one poll: resistance per channel (float32, as the
-    binary frame carries it), ``inf`` for an open channel, nothing for the rest."""
+    """What the record format allows for one poll: resistance per channel (rounded to 6
+    decimals, then float32, as the binary frame carries it), ``inf`` for an open channel,
+    nothing for the rest."""
     out: dict[str, float] = {}
     for k, name in enumerate(snap.channel_names):
         status = STATUS_LABELS[int(snap.status[k])]
-        r = float(np.float32(snap.resistance_ohm[k]))
+        r = _f32(snap.resistance_ohm[k])
         if status == "open" or (status in WITH_VALUE and not math.isfinite(r)):
             out[name] = math.inf
         elif status in WITH_VALUE and r > 0.0:
@@ -189,11 +208,9 @@ async def test_subscribe_records_50_binary_frames_that_read_back_as_published(
     _assert_record_has_the_rows_of(record, snaps)
     # the frame's own values agree with the gateway's export at the same sequence number
     for f, s in zip(frames, snaps, strict=True):
-        assert f["device_time_s"] == s.device_time_s
-        assert f["total_force_n"] == pytest.approx(s.total_force_n)
-        assert f["force_n"] == pytest.approx(
-            [None if not np.isfinite(v) else float(np.float32(v)) for v in s.force_n], rel=1e-6
-        )
+        assert f["device_time_s"] == round(s.device_time_s, 6)
+        assert f["total_force_n"] == round(s.total_force_n, 6)
+        assert f["force_n"] == [None if not np.isfinite(v) else _f32(v) for v in s.force_n]
 
 
 class _Lines:
@@ -214,11 +231,12 @@ GAP = re.compile(r"gw1/arr: gap: (\d+) frame\(s\) missing before sequence (\d+)"
 
 
 async def test_subscribe_rides_out_a_broker_restart_and_counts_the_frames_lost_in_it(
-    tmp_path: Path, broker: Broker, tls_files: dict[str, Path]
+    tmp_path: Path, volatile_broker: Broker, tls_files: dict[str, Path]
 ) -> None:
-    """The subscriber uses a clean session: the broker's persistence keeps nothing for it, so
-    after the restart it must subscribe again itself. The frames published while it was away
-    are lost to it, and its summary must count exactly those."""
+    """A broker without persistence forgets the subscriber's session in a restart: the
+    subscriber says so, subscribes again itself, and the frames published while it was away
+    are lost to it; its summary must count exactly those."""
+    broker = volatile_broker
     ca = tls_files["ca.crt"]
     where = f"127.0.0.1:{broker.port}"
     array = SimArray(ArrayConfig(channels=4, columns=2, scenario="indentation", speed=5.0, seed=2))
@@ -297,6 +315,9 @@ async def test_subscribe_rides_out_a_broker_restart_and_counts_the_frames_lost_i
     lost_at = [i for i, s in enumerate(stderr.lines) if s.startswith(f"lost the connection to {where} (")]
     back_at = [i for i, s in enumerate(stderr.lines) if s == f"reconnected to {where}"]
     assert len(lost_at) == 1 and len(back_at) == 1 and lost_at[0] < back_at[0], err
+    no_session = stderr.lines[back_at[0] + 1]
+    assert no_session.startswith("the broker kept no session for 'tactile-sub-"), err
+    assert no_session.endswith("frames published meanwhile are lost"), err
     assert stderr.lines[lost_at[0]].endswith("; reconnecting"), err
     retries = [s for s in stderr.lines[lost_at[0] + 1 : back_at[0]] if s.endswith("; retrying")]
     assert all(line.startswith(f"cannot connect to {where}") for line in retries), err
@@ -306,7 +327,7 @@ async def test_subscribe_rides_out_a_broker_restart_and_counts_the_frames_lost_i
     unexpected = [
         line
         for k, line in enumerate(stderr.lines[:-1])
-        if k not in lost_at + back_at and line not in retries and gap_lines[k] is None
+        if k not in [*lost_at, *back_at, back_at[0] + 1] and line not in retries and gap_lines[k] is None
     ]
     assert unexpected == [], err
     delivered, missing, gaps, extras = summary.groups()
@@ -341,6 +362,125 @@ async def test_subscribe_rides_out_a_broker_restart_and_counts_the_frames_lost_i
     first_after = round(exported.by_seq[both_up + 1].device_time_s - t0, 6)
     assert (times <= last_before + 1e-3).any() and (times >= first_after - 1e-3).any()
     assert f"{sum(c.n_samples for c in record.channels.values())} rows to {out}" in extras
+
+
+async def test_a_persistent_session_gets_the_frames_published_while_subscribe_was_away(
+    tmp_path: Path, broker: Broker, tls_files: dict[str, Path]
+) -> None:
+    """Item 11 of issue 24: the broker restarts (persistence on) and the gateway flushes its
+    queue to it before the subscriber is back. The subscriber is held (SIGSTOP) until the
+    gateway has published 40 frames more to the restarted broker; its persistent session
+    (fixed client id, clean start off, QoS 1) makes the broker queue them, and they all
+    arrive after it reconnects: not one sequence number missing, none twice."""
+    ca = tls_files["ca.crt"]
+    where = f"127.0.0.1:{broker.port}"
+    array = SimArray(ArrayConfig(channels=4, columns=2, scenario="indentation", speed=5.0, seed=2))
+    out = tmp_path / "rec.csv"
+    async with serve_tcp([array], host="127.0.0.1", port=0) as server:
+        # a queue at the gateway that holds the whole outage: the gateway drops nothing
+        path = _gateway_config(tmp_path, server.port, broker.port, ca, "queue_frames = 10000\n")
+        config = load_config(path)
+        holder = SnapshotHolder()
+        exported = Exported()
+        holder.subscribe(exported)
+        publisher = MqttPublisher(config)
+        holder.subscribe(publisher.on_snapshot)
+        publisher.start()
+        proc: asyncio.subprocess.Process | None = None
+        readers: list[_Lines] = []
+        stopped = False
+        try:
+            async with Poller(config, holder):
+                assert await until(lambda: publisher.stats().published.get("arr", 0) >= 5, 20.0)
+                cmd = _subscribe_cmd(
+                    broker, tmp_path, ca, "--gateway", "gw1", "--device", "arr",
+                    "--out", str(out), "--json",
+                )  # fmt: skip
+                proc = await asyncio.create_subprocess_exec(
+                    *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE
+                )
+                stdout, stderr = _Lines(proc.stdout), _Lines(proc.stderr)
+                readers = [stdout, stderr]
+                running = proc
+
+                def seqs() -> list[int]:
+                    return [json.loads(line)["sequence"] for line in stdout.lines]
+
+                def said(text: str) -> list[str]:
+                    return [line for line in stderr.lines if text in line]
+
+                def published() -> int:
+                    return publisher.stats().published.get("arr", 0)
+
+                async def wait(cond: Callable[[], object], timeout_s: float, what: str) -> None:
+                    await until(lambda: bool(cond()) or running.returncode is not None, timeout_s)
+                    assert running.returncode is None, (
+                        f"the subscriber exited ({running.returncode}) waiting for {what}: {stderr.lines}"
+                    )
+                    assert cond(), f"no {what} in {timeout_s:g} s: {stderr.lines}"
+
+                await wait(lambda: len(stdout.lines) >= 20, 30.0, "20 frames")
+                # a clean restart: mosquitto saves its sessions and queued messages on the way down
+                await asyncio.to_thread(broker.stop)
+                await wait(lambda: said("lost the connection"), 20.0, "notice of the lost connection")
+                last_before = seqs()[-1]
+                proc.send_signal(signal.SIGSTOP)
+                stopped = True
+                n_stopped = len(stdout.lines)
+                published_down = published()
+                await asyncio.to_thread(broker.start)
+                # the gateway is back and flushes its queue; 40 frames more reach the broker
+                # while the subscriber cannot be connected
+                await wait(
+                    lambda: publisher.stats().connected and published() >= published_down + 40,
+                    60.0,
+                    "the gateway publishing to the restarted broker",
+                )
+                published_away = published()
+                proc.send_signal(signal.SIGCONT)
+                stopped = False
+                await wait(lambda: said("reconnected to"), 60.0, "reconnection")
+                await wait(
+                    lambda: seqs() and seqs()[-1] >= published_away + 20, 30.0, "frames after the restart"
+                )
+                proc.send_signal(signal.SIGINT)
+                await asyncio.wait_for(proc.wait(), 30.0)
+                dropped = publisher.stats().dropped.get("arr", 0)
+                await asyncio.wait_for(asyncio.gather(*(r.task for r in readers)), 10.0)
+        finally:
+            publisher.stop()
+            if proc is not None and proc.returncode is None:
+                if stopped:
+                    proc.send_signal(signal.SIGCONT)
+                proc.kill()
+                await proc.wait()
+            for r in readers:
+                r.task.cancel()
+            await asyncio.gather(*(r.task for r in readers), return_exceptions=True)
+    err = "\n".join(stderr.lines)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err and "kept no session" not in err, err
+    assert not any(GAP.fullmatch(line) for line in stderr.lines), err
+    assert len(said(f"lost the connection to {where}")) == 1 and said(f"reconnected to {where}"), err
+    assert dropped == 0, "the gateway kept every frame"
+
+    got = seqs()
+    assert got == list(range(got[0], got[-1] + 1)), "every frame once, in order, none missing"
+    summary = SUMMARY.fullmatch(stderr.lines[-1])
+    assert summary is not None, err
+    assert summary.group(1) == str(len(got)) and summary.group(2, 3) == ("0", "0"), err
+    # QoS 1 is at least once: a frame in flight when the broker went down may come twice;
+    # the subscriber drops it by its sequence number (and says so in the summary)
+    assert "backwards" not in summary.group(4) and "restart" not in summary.group(4), err
+    # the frames published while the subscriber was away, counted: those after the last it
+    # had when the broker went down, up to the last the restarted broker acknowledged while
+    # the subscriber was held; each of them delivered after the reconnection
+    away = list(range(last_before + 1, published_away + 1))
+    assert len(away) >= 40
+    after = got[n_stopped:]
+    assert after[: len(away)] == away, (last_before, published_away, after[:5])
+    snaps = [exported.by_seq[s] for s in got]
+    _assert_record_has_the_rows_of(read_record(out), snaps)
 
 
 def _run(cmd: list[str], timeout: float = 30.0) -> subprocess.CompletedProcess[str]:

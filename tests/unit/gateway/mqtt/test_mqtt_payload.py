@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import struct
 from collections.abc import Callable
 
@@ -164,3 +165,30 @@ def test_bytes_that_are_not_a_frame_are_refused(mutate: Callable[[bytes], bytes]
     data = encode_binary(frame_dict(snapshot(), 1))
     with pytest.raises(FrameDecodeError, match=fragment):
         decode_binary(mutate(data))
+
+
+def test_published_floats_are_rounded_to_6_decimals_without_float_noise() -> None:
+    """Binary float noise (``15.620000000000001``) is not published: every float of a frame is
+    rounded to 6 decimals (1 µN, 1 µs, 1 µΩ), the same keys and absent values as before."""
+    noisy = 15.620000000000001
+    snap = snapshot(
+        force_n=np.array([noisy, 0.1234567891, math.nan, 0.0]),
+        resistance_ohm=np.array([41230.50000000001, math.inf, 91234567.12345679, 1e-9]),
+        total_force_n=noisy,
+        center_of_pressure_mm=(noisy, 2.0000000000000004),
+        contact_area_mm2=12.500000000000002,
+        device_time_s=184.21000000000001 + 1e-12,
+        timestamp_s=1_700_000_000.1234567,
+    )
+    frame = frame_dict(snap, 1)
+    assert frame["force_n"] == [15.62, 0.123457, None, 0.0]
+    assert frame["resistance_ohm"] == [41230.5, None, 91234567.123457, 0.0]
+    assert frame["total_force_n"] == 15.62 and frame["center_of_pressure_mm"] == [15.62, 2.0]
+    assert frame["contact_area_mm2"] == 12.5 and frame["device_time_s"] == 184.21
+    assert frame["host_time_s"] == 1_700_000_000.123457, "decimals, not significant digits"
+    text = encode_json(frame).decode()
+    assert "15.620000000000001" not in text and '"force_n":[15.62,0.123457,null,0.0]' in text
+    numbers = [float(t) for t in re.findall(r"-?\d+\.\d+(?:e-?\d+)?", text)]
+    assert all(round(v, 6) == v for v in numbers)
+    assert json.loads(text) == frame
+    assert set(frame) == set(frame_dict(snapshot(), 1)), "the same keys"

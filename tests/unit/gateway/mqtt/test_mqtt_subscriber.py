@@ -295,3 +295,20 @@ def test_a_stop_during_the_reconnect_back_off_ends_the_wait_at_once(monkeypatch:
     monkeypatch.setattr(subscriber.time, "monotonic", lambda: next(clock))
     assert subscriber._wait(0.35, lambda: False) is False
     assert len(slept) == 3 and max(slept) <= 0.1
+
+
+def test_the_default_client_id_is_fixed_for_the_host_and_the_filters() -> None:
+    """A persistent session needs the same client id on every connect and every run."""
+    from gateway.mqtt.subscribe_settings import SESSION_EXPIRY_S, default_client_id
+
+    a = SubscribeSettings("b", 1883, prefix="lab/tactile", gateway="gw1", device="arr")
+    again = SubscribeSettings("b", 1883, prefix="lab/tactile", gateway="gw1", device="arr")
+    other = SubscribeSettings("b", 1883, prefix="lab/tactile", gateway="gw1", device="+")
+    assert a.client_id == again.client_id != other.client_id
+    assert a.client_id.startswith("tactile-sub-") and a.session_expiry_s == SESSION_EXPIRY_S == 3600
+    assert default_client_id("p", "+", "+", None, host="my host.lab").startswith("tactile-sub-my-host-lab-")
+    assert SubscribeSettings("b", 1883, client_id="rec-1").client_id == "rec-1"
+    with pytest.raises(ConfigError, match="--client-id"):
+        SubscribeSettings("b", 1883, client_id="x" * 65)
+    with pytest.raises(ConfigError, match="--session-expiry"):
+        SubscribeSettings("b", 1883, session_expiry_s=-1)
