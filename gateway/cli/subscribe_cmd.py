@@ -33,6 +33,7 @@ import click
 from ..analysis.recorder import record_path_ok
 from ..analysis.records import RecordWriter
 from ..errors import ConfigError
+from ..mqtt.subscribe_settings import SESSION_EXPIRY_S
 from ..mqtt.subscriber import (
     Frame,
     FrameStream,
@@ -157,6 +158,20 @@ def _fail(message: str) -> None:
     callback=finite_seconds,
     help="stop after seconds",
 )
+@click.option(
+    "--client-id",
+    "client_id",
+    default="",
+    help="the MQTT client id of the persistent session (default: one fixed per host and topic filters)",
+)
+@click.option(
+    "--session-expiry",
+    "session_expiry_s",
+    type=click.IntRange(0, 4294967295),
+    default=SESSION_EXPIRY_S,
+    show_default=True,
+    help="seconds the broker keeps the session (and queues frames) of a lost subscriber",
+)
 @click.option("--json", "as_json", is_flag=True, help="print each frame as one JSON object per line")
 @click.option("--quiet", "-q", is_flag=True, help="print no frames (with --out)")
 def subscribe(
@@ -171,6 +186,8 @@ def subscribe(
     out_path: Path | None,
     count: int | None,
     duration_s: float | None,
+    client_id: str,
+    session_expiry_s: int,
     as_json: bool,
     quiet: bool,
 ) -> None:
@@ -183,7 +200,17 @@ def subscribe(
         if tls_ca is not None and not tls_ca.is_file():
             raise ConfigError(f"--tls-ca: {tls_ca} does not exist or is not a file")
         settings = SubscribeSettings(
-            host, port, tls_ca, username, password, prefix, gateway, device, share_group
+            host,
+            port,
+            tls_ca,
+            username,
+            password,
+            prefix,
+            gateway,
+            device,
+            share_group,
+            client_id=client_id,
+            session_expiry_s=session_expiry_s,
         )
         if out_path is not None:
             record_path_ok(out_path)

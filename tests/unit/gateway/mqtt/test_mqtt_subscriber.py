@@ -312,3 +312,26 @@ def test_the_default_client_id_is_fixed_for_the_host_and_the_filters() -> None:
         SubscribeSettings("b", 1883, client_id="x" * 65)
     with pytest.raises(ConfigError, match="--session-expiry"):
         SubscribeSettings("b", 1883, session_expiry_s=-1)
+
+
+def test_the_command_line_passes_the_client_id_and_the_session_expiry(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from click.testing import CliRunner
+
+    from gateway.cli import main, subscribe_cmd
+    from gateway.mqtt.subscriber import SubscribeError
+
+    seen: list[SubscribeSettings] = []
+
+    def stop(settings: SubscribeSettings, *args: object, **kwargs: object) -> None:
+        seen.append(settings)
+        raise SubscribeError("stopped by the test")
+
+    monkeypatch.setattr(subscribe_cmd, "run_subscriber", stop)
+    args = ["subscribe", "--broker", "127.0.0.1:1", "--client-id", "bench-7", "--session-expiry", "120"]
+    out = CliRunner().invoke(main, args)
+    assert "stopped by the test" in out.output and "Traceback" not in out.output
+    assert seen and seen[0].client_id == "bench-7" and seen[0].session_expiry_s == 120
+    bad = CliRunner().invoke(main, ["subscribe", "--broker", "127.0.0.1:1", "--session-expiry", "-1"])
+    assert bad.exit_code == 2 and "--session-expiry" in bad.output
