@@ -20,7 +20,7 @@ from typing import TextIO
 
 from ..config import GatewayConfig
 from ..runtime.snapshot import VALUED_STATUSES, ChannelStatus, GatewaySnapshot
-from .records import RecordWriter
+from .records import REQUIRED_COLUMNS, RecordWriter
 
 #: the statuses whose row keeps its value: ok, no_contact, saturated, extrapolated
 _WITH_VALUE = {int(s) for s in VALUED_STATUSES}
@@ -118,14 +118,47 @@ class LiveRecorder:
             self.stats.rows += rows
 
 
-def record_path_ok(path: Path, force: bool = False) -> None:
-    """Refuse to overwrite a directory, an existing file (unless ``force``) or to write into a
-    missing or read-only folder (clear messages)."""
+#: How much of an existing file ``is_record_file`` reads to find the header row.
+_HEAD_BYTES = 64 * 1024
+
+
+def is_record_file(path: Path) -> bool:
+    """True if ``path`` is a regular file in the record format: ``#`` metadata lines (or
+    none), then a header row naming ``time_s`` and ``resistance_ohm``. Reads its first 64 kB."""
+    try:
+        if not path.is_file():
+            return False
+        with path.open("rb") as fh:
+            head = fh.read(_HEAD_BYTES).decode("utf-8-sig", errors="replace")
+    except OSError:
+        return False
+    lines = head.splitlines()
+    if len(head) == _HEAD_BYTES and lines:
+        lines.pop()  # maybe cut short
+    for line in lines:
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        columns = {c.strip() for c in stripped.split(",")}
+        return all(name in columns for name in REQUIRED_COLUMNS)
+    return False
+
+
+def record_path_ok(path: Path, force: bool = False, replace_record: bool = False) -> None:
+    """Refuse to overwrite a directory, an existing file (unless ``force``; with
+    ``replace_record`` an existing record is replaced, another kind of file still needs
+    ``force``) or to write into a missing or read-only folder (clear messages)."""
     if path.is_dir():
         raise ValueError(f"{path} is a directory")
     if not path.parent.exists():
         raise ValueError(f"directory {path.parent} does not exist")
     if path.exists() and not force:
-        raise ValueError(f"{path} exists; refusing to overwrite it (use --force to replace it)")
+        if not replace_record:
+            raise ValueError(f"{path} exists; refusing to overwrite it (use --force to replace it)")
+        if not is_record_file(path):
+            raise ValueError(
+                f"{path} exists and is not a record (no time_s,resistance_ohm header; it could be your "
+                "configuration or other data); refusing to replace it: choose another file, or --force"
+            )
     if not os.access(path.parent, os.W_OK):
         raise ValueError(f"directory {path.parent} is not writable")

@@ -27,6 +27,7 @@ from ..config.editor import (
     parse_assignment,
     read_config_text,
 )
+from ..config.mqtt import MqttConfig
 from ..errors import ConfigError
 from ..metrics.web_config import load_web_config
 from ..modbus.plan import MERGE_GAP, device_plan
@@ -124,6 +125,11 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
         out.append(f"    check at connect: identification {key} = {value!r} (FC 43/14)")
     if dev.encoding == "adc":
         out.append(f"    front end: {dev.front_end.describe()}")
+    out.append(
+        f"    calibration: {dev.calibration}"
+        if dev.calibration is not None
+        else "    calibration: none (the parameters of this file and the defaults)"
+    )
     tared = [ch for ch in dev.channels if ch.baseline_ohm is not None]
     if tared:
         values = [ch.baseline_ohm for ch in tared if ch.baseline_ohm is not None]
@@ -155,6 +161,31 @@ def _bus_line(bus: BusConfig) -> str:
     )
 
 
+def _host_port(host: str, port: int) -> str:
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
+def _mqtt_line(mqtt: MqttConfig | None) -> str:
+    """Where frames are published, without the credentials (not the user name, not the
+    password file)."""
+    if mqtt is None:
+        return "mqtt: off (no [mqtt] section)"
+    tls = ""
+    if mqtt.tls is not None:
+        tls = " over TLS" + ("" if mqtt.tls.verify else " (certificate not verified)")
+    login = (
+        ", with a user name and password"
+        if mqtt.password_file
+        else (", with a user name" if mqtt.username else "")
+    )
+    rate = "every poll" if mqtt.max_rate_hz == 0 else f"at most {mqtt.max_rate_hz:g} frames/s per device"
+    return (
+        f"mqtt: {_host_port(mqtt.host, mqtt.port)}{tls}, MQTT {mqtt.protocol}, client id {mqtt.client_id}"
+        f"{login}; {mqtt.encoding} frames ({rate}, qos {mqtt.qos}) on {mqtt.topic('<device>', 'frame')}, "
+        f"status on {mqtt.topic('status')}"
+    )
+
+
 @click.command("check-config")
 @config_option
 def check_config(config_path: Path) -> None:
@@ -177,9 +208,8 @@ def check_config(config_path: Path) -> None:
         f"{_plural(n_channels, 'channel')})"
     )
     web = f", web config {config.metrics.web_config}" if config.metrics.web_config else ""
-    host = config.metrics.host
-    shown_host = f"[{host}]" if ":" in host else host
-    click.echo(f"metrics: {shown_host}:{config.metrics.port}/metrics{web}")
+    click.echo(f"metrics: {_host_port(config.metrics.host, config.metrics.port)}/metrics{web}")
+    click.echo(_mqtt_line(config.mqtt))
     for bus in config.buses:
         click.echo(_bus_line(bus))
         for dev in bus.devices:

@@ -48,11 +48,13 @@ async def record_live(
     metadata: dict[str, str] | None = None,
     show_progress: bool = True,
     until: Callable[[], bool] | None = None,
+    keep_existing_if_empty: bool = False,
 ) -> RecorderStats:
     """Poll with ``config`` for ``duration_s`` seconds, or until ``until()`` holds (checked
     every 50 ms), and write a record to ``out_path``: into a temporary file beside it, renamed
     over it at the end (also after SIGINT/SIGTERM), so that a killed recording never leaves a
-    file that looks like a complete record."""
+    file that looks like a complete record. With ``keep_existing_if_empty`` (``out_path``
+    exists) a recording without a sample leaves ``out_path`` as it was."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its errors reach us as read errors
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -86,6 +88,8 @@ async def record_live(
                         await asyncio.wait_for(stop.wait(), timeout=wait_s)
             if show_progress:
                 _progress(min(time.monotonic() - t0, duration_s), duration_s, recorder.stats, final=True)
+            if keep_existing_if_empty and recorder.stats.rows == 0:
+                return recorder.stats  # the temporary file is removed below
             fh.flush()
             os.fsync(fh.fileno())
         mask = os.umask(0o022)
@@ -107,16 +111,22 @@ async def record_live(
 @click.option("--duration", "duration_s", required=True, type=click.FloatRange(min=0.0), help="seconds")
 @click.option("--out", "out_path", required=True, type=click.Path(path_type=Path), help="record CSV to write")
 @click.option("--channels", default=None, help="comma-separated channel names (default: all)")
-@click.option("--force", "overwrite", is_flag=True, help="replace an existing record file")
+@click.option(
+    "--force", "overwrite", is_flag=True, help="replace --out even if it is not a record (e.g. another CSV)"
+)
 def record(
     config_path: Path, duration_s: float, out_path: Path, channels: str | None, overwrite: bool
 ) -> None:
     """Write a measurement record from live polls (reference force and temperature where available).
 
+    ``--out`` replaces an earlier record (as ``calibrate --out`` replaces an earlier
+    calibration file), but never another kind of file unless ``--force``; a recording that
+    got no sample leaves an earlier record as it was.
+
     Exit status 1 when no sample was recorded (every device down), 2 for bad arguments."""
     try:
         config = load_config(config_path)
-        record_path_ok(out_path, force=overwrite)
+        record_path_ok(out_path, force=overwrite, replace_record=True)
     except (ConfigError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None
     names = [c.strip() for c in channels.split(",") if c.strip()] if channels else None
@@ -125,16 +135,28 @@ def record(
     for name in names or []:
         if name not in known:
             raise click.UsageError(f"no channel {name!r} in {config_path}")
+    existed = out_path.exists()
     stats = asyncio.run(
-        record_live(config, out_path, duration_s, names, metadata={"config": str(config_path)})
+        record_live(
+            config,
+            out_path,
+            duration_s,
+            names,
+            metadata={"config": str(config_path)},
+            keep_existing_if_empty=existed,
+        )
     )
-    click.echo(
-        f"wrote {stats.rows} samples from {stats.polls} polls to {out_path} ({stats.read_errors} read errors)"
-    )
+    kept = stats.rows == 0 and existed
+    if not kept:
+        click.echo(
+            f"wrote {stats.rows} samples from {stats.polls} polls to {out_path} "
+            f"({stats.read_errors} read errors)"
+        )
     if stats.rows == 0:
         click.echo(
             f"record: no sample recorded in {duration_s:g} s: no device answered ({stats.read_errors} read "
-            "errors); check the devices and the configuration",
+            f"errors){f'; {out_path} is left as it was' if kept else ''}; check the devices and the "
+            "configuration",
             err=True,
         )
         raise SystemExit(1)

@@ -216,8 +216,9 @@ def snapshot_json(snap: GatewaySnapshot) -> dict[str, Any]:
     return {"devices": devices}
 
 
-def _fmt(x: float | None, spec: str) -> str:
-    return "-" if x is None else format(x, spec)
+def _fmt(x: float | None, width: int, decimals: int) -> str:
+    """``x`` right-aligned in ``width`` characters; "-" (aligned the same) when absent."""
+    return f"{'-':>{width}}" if x is None else f"{x:{width}.{decimals}f}"
 
 
 def snapshot_table(snap: GatewaySnapshot) -> str:
@@ -231,8 +232,8 @@ def snapshot_table(snap: GatewaySnapshot) -> str:
         )
         for c in dev.channels():
             lines.append(
-                f"  {c.name:<10} {c.status.label:<12} {_fmt(c.resistance_ohm, '15.1f')} "
-                f"{_fmt(c.force_n, '9.3f')} {_fmt(c.force_static_n, '9.3f')}"
+                f"  {c.name:<10} {c.status.label:<12} {_fmt(c.resistance_ohm, 15, 1)} "
+                f"{_fmt(c.force_n, 9, 3)} {_fmt(c.force_static_n, 9, 3)}"
             )
         cop = dev.center_of_pressure_mm
         where = "-" if cop is None else f"({cop[0]:.2f}, {cop[1]:.2f}) mm"
@@ -350,7 +351,7 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
                         snap = holder.get().devices.get("demo")
                         if snap is not None and tty:
                             frame = render_view(snap, 4, server.url, color=tty, page_url=server.page_url)
-                            out.write("\x1b[H" + frame + "\x1b[J")
+                            out.write(redraw(frame))
                             out.flush()
                         elif snap is not None and (time.monotonic() >= next_line or (first and snap.up)):
                             first = False
@@ -368,6 +369,14 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
     return 0
+
+
+def redraw(frame: str) -> str:
+    """``frame`` drawn over the previous one from the top-left corner: each line ends with
+    "erase to the end of the line" (a shorter line must not leave the tail of a longer one,
+    ``6.25 mm^2`` over ``156.25 mm^2`` read ``6.25 mm^22``), and the rest of the screen is
+    erased below the last line."""
+    return "\x1b[H" + "\x1b[K\n".join(frame.split("\n")) + "\x1b[K\x1b[J"
 
 
 def _summary_line(snap: DeviceSnapshot) -> str:

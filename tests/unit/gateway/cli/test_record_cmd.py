@@ -23,13 +23,13 @@ def _config(tmp_path: Path) -> Path:
     return path
 
 
-def test_an_existing_record_is_not_overwritten_without_force(tmp_path: Path) -> None:
+def test_an_existing_file_that_is_not_a_record_is_not_overwritten_without_force(tmp_path: Path) -> None:
     out = tmp_path / "run.csv"
     out.write_text("precious\n")
     result = CliRunner().invoke(
         main, ["record", "-c", str(_config(tmp_path)), "--duration", "0", "--out", str(out)]
     )
-    assert result.exit_code == 2 and "exists; refusing to overwrite it (use --force" in result.output
+    assert result.exit_code == 2 and "is not a record" in result.output and "or --force" in result.output
     assert out.read_text() == "precious\n"
 
 
