@@ -79,12 +79,20 @@ _log_level = click.option(
 
 
 # --------------------------------------------------------------------------- run
-def _page(holder: SnapshotHolder, config: GatewayConfig, enabled: bool = True) -> WebPage | None:
+def _page(
+    holder: SnapshotHolder,
+    config: GatewayConfig,
+    enabled: bool = True,
+    running: list[GatewayConfig] | None = None,
+) -> WebPage | None:
     """The live page over ``holder``, unless it is turned off (``--no-page``, or a ``page =
-    false`` of the metrics section where the configuration has that key)."""
+    false`` of the metrics section where the configuration has that key). ``running`` holds
+    the configuration in force (its one item replaced on a reload): the page's devices take
+    their cell area and disabled channels from it."""
     if not enabled or not config.metrics.page:
         return None
-    return WebPage(FrameHub(holder))
+    current = running if running is not None else [config]
+    return WebPage(FrameHub(holder), device_configs=lambda: [d for b in current[0].buses for d in b.devices])
 
 
 async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None, page_on: bool = True) -> int:
@@ -92,7 +100,8 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
     holder = SnapshotHolder()
     registry = SnapshotRegistry(holder.get)
     registry.register(EventLoopCollector(asyncio.get_running_loop()))
-    page = _page(holder, config, page_on)
+    running = [config]
+    page = _page(holder, config, page_on, running)
     install = page.install if page is not None else None
     try:
         server = MetricsServer(registry, config.metrics.host, config.metrics.port, web, install).start()
@@ -131,6 +140,7 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
             if new_config.metrics != config.metrics or new_web != web:
                 server = _restart_server(server, registry, new_config.metrics, new_web, install)
             config, web = new_config, new_web
+            running[0] = config
     finally:
         for sig in handled:
             loop.remove_signal_handler(sig)
@@ -331,7 +341,10 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
             registry = SnapshotRegistry(holder.get)
             try:
                 server = MetricsServer(
-                    registry, host, port, install=WebPage(FrameHub(holder)).install
+                    registry,
+                    host,
+                    port,
+                    install=WebPage(FrameHub(holder), device_configs=lambda: [device]).install,
                 ).start()
             except OSError as exc:
                 click.echo(f"tactile-gateway: cannot serve metrics on {host}:{port}: {exc}", err=True)

@@ -29,12 +29,13 @@ import contextlib
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from importlib import resources
 from typing import Any
 
 from aiohttp import web
 
+from ..config.schema import DeviceConfig
 from .frames import encode_frame, layout_json, with_dropped
 from .hub import FrameHub
 
@@ -71,8 +72,12 @@ class WebPage:
         scale_max_n: float = 5.0,
         clock: Callable[[], float] = time.monotonic,
         write_timeout_s: float = WRITE_TIMEOUT_S,
+        device_configs: Callable[[], Iterable[DeviceConfig]] | None = None,
     ) -> None:
         self.hub = hub
+        #: the devices' configurations as now in force (a reload changes them), for what the
+        #: frames do not carry: disabled channels and the layout's cell area
+        self.device_configs = device_configs
         self.write_timeout_s = write_timeout_s
         #: streams ended because their client stopped reading
         self.stalled_total = 0
@@ -131,7 +136,10 @@ class WebPage:
         entry = self.hub.latest(name)
         if entry is None:
             return None
-        out = layout_json(entry.snapshot, self.scale_max_n)
+        config = None
+        if self.device_configs is not None:
+            config = next((c for c in self.device_configs() if c.name == name), None)
+        out = layout_json(entry.snapshot, self.scale_max_n, config)
         out.update(
             up=entry.snapshot.up if entry.seq else None,  # None: no poll of it has completed yet
             seq=entry.seq,

@@ -9,11 +9,13 @@ every frame is strict JSON. Frames are encoded once per poll and shared by every
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from collections.abc import Iterable
 from typing import Any
 
+from ..config.schema import DeviceConfig
 from ..runtime.counters import DeviceCounters
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
@@ -47,25 +49,50 @@ def _channel(dev: DeviceSnapshot, k: int) -> dict[str, Any]:
     }
 
 
-def layout_json(dev: DeviceSnapshot, scale_max_n: float) -> dict[str, Any]:
+def cell_area_from_positions(x_mm: Iterable[float], y_mm: Iterable[float]) -> float | None:
+    """A grid's cell area (mm^2) from its channels' positions: the smallest spacing along x
+    times the smallest along y (one of them alone for a single row or column), or None for
+    a single channel. It is ``layout.cell_area_mm2`` when no row or column is wholly off."""
+
+    def step(values: Iterable[float]) -> float | None:
+        v = sorted({round(float(a), 6) for a in values if math.isfinite(float(a))})
+        gaps = [b - a for a, b in itertools.pairwise(v) if b - a > 1e-9]
+        return min(gaps) if gaps else None
+
+    sx, sy = step(x_mm), step(y_mm)
+    if sx is None and sy is None:
+        return None
+    return float((sx or sy or 0.0) * (sy or sx or 0.0))
+
+
+def layout_json(
+    dev: DeviceSnapshot, scale_max_n: float, config: DeviceConfig | None = None
+) -> dict[str, Any]:
     """The static description of a device: channels, positions (mm, y grows downward as
-    drawn), units, the status labels by code and the fixed colour scale of the page (N)."""
+    drawn), units, the status labels by code, the page's default colour scale (N), the area
+    of one cell (mm^2: the layout's ``pitch_x_mm * pitch_y_mm``; the page's pressure is force
+    over it) and the channels turned off in the configuration (``enabled = false``: they are
+    never polled, so frames do not carry them; ``null`` when the page was not given the
+    configuration)."""
+    if config is not None:
+        area: float | None = config.layout.cell_area_mm2
+        disabled: list[dict[str, Any]] | None = [
+            {"index": ch.index, "name": ch.name, "x_mm": num(ch.x_mm), "y_mm": num(ch.y_mm)}
+            for ch in config.channels
+            if not ch.enabled
+        ]
+    else:
+        area, disabled = cell_area_from_positions(dev.x_mm, dev.y_mm), None
     return {
         "name": dev.device,
         "bus": dev.bus,
         "poll_interval_s": num(dev.poll_interval_s),
-        "units": UNITS,
+        "units": {**UNITS, "pressure": "kPa"},
         "status_labels": list(STATUS_LABELS),
         "scale_n": [0.0, float(scale_max_n)],
-        "channels": [
-            {
-                "index": int(dev.channel_index[k]),
-                "name": dev.channel_names[k],
-                "x_mm": num(float(dev.x_mm[k])),
-                "y_mm": num(float(dev.y_mm[k])),
-            }
-            for k in range(dev.n_channels)
-        ],
+        "cell_area_mm2": num(area),
+        "channels": [_channel(dev, k) for k in range(dev.n_channels)],
+        "disabled_channels": disabled,
     }
 
 

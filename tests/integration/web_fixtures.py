@@ -15,11 +15,17 @@ import pytest
 from prometheus_client import CollectorRegistry
 from test_gateway_tcp import array_device
 
-from gateway.config import bus_config_for, gateway_config_for
+from gateway.config import ChannelConfig, DeviceConfig, RegisterMap, bus_config_for, gateway_config_for
+from gateway.config.layout import GridLayout
 from gateway.metrics.collector import make_registry
 from gateway.metrics.server import MAX_CONNECTIONS, MetricsServer
 from gateway.metrics.web_config import WebConfig
+from gateway.modbus.image import RawSample
+from gateway.model import PAPER_EFFECTS, Divider, SensorParams
+from gateway.model.conversion import LineConversion
 from gateway.runtime.poller import Poller, SnapshotHolder
+from gateway.runtime.processor import DeviceProcessor
+from gateway.runtime.snapshot import GatewaySnapshot
 from gateway.web import FrameHub, WebPage
 from gateway.web.app import WRITE_TIMEOUT_S
 from sim_device import ArrayConfig, SimArray, serve_tcp
@@ -110,7 +116,9 @@ async def gateway_with_page(
     holder = SnapshotHolder()
     registry = make_registry(holder.get, CollectorRegistry())
     hub = FrameHub(holder)
-    page = WebPage(hub, scale_max_n=scale_max_n, write_timeout_s=write_timeout_s)
+    configs: list[DeviceConfig] = []  # the page reads the device's configuration once it is made
+    page = WebPage(hub, scale_max_n=scale_max_n, write_timeout_s=write_timeout_s,
+                   device_configs=lambda: configs)  # fmt: skip
     server = MetricsServer(
         registry, "127.0.0.1", 0, web_config, page.install, max_connections=max_connections
     )
@@ -118,6 +126,7 @@ async def gateway_with_page(
     try:
         await gw.start_sim()
         device = array_device(gw.array, "arr", bench=False)
+        configs.append(device)
         bus = bus_config_for("sim", "tcp", [device], host="127.0.0.1", port=gw.sim_port,
                              poll_interval_s=0.05, timeout_s=0.3, backoff_max_s=0.3)  # fmt: skip
         with server:
@@ -126,3 +135,43 @@ async def gateway_with_page(
     finally:
         await gw.sim.aclose()
         server.stop()
+
+
+@contextlib.asynccontextmanager
+async def steady_page(
+    forces: list[float], disabled: tuple[int, ...] = (), scale_max_n: float = 5.0
+) -> AsyncIterator[MetricsServer]:
+    """A 4 x 4 array (pitch 2.5 mm: cells of 6.25 mm^2) whose channels read ``forces`` (N)
+    at every poll (20 Hz), the channels ``disabled`` turned off in its configuration, served
+    with the page: the map does not move, so its pixels can be checked exactly."""
+    m, n = 2e-5, 1e-6
+    line = LineConversion(m, n, 0.01, 50.0)
+    channels = tuple(
+        ChannelConfig(k, f"ch{k:02d}", (k % 4) * PITCH_MM, (k // 4) * PITCH_MM, k not in disabled,
+                      PAPER_EFFECTS, SensorParams(), None, line)
+        for k in range(16)
+    )  # fmt: skip
+    device = DeviceConfig("arr", 1, "float32", 16, RegisterMap(), Divider(), channels, False,
+                          GridLayout(16, 4, PITCH_MM, PITCH_MM), None)  # fmt: skip
+    r = np.array([1.0 / (m * f + n) for f in forces])
+    proc = DeviceProcessor(device, "sim", 0.05)
+    holder = SnapshotHolder()
+    page = WebPage(FrameHub(holder), scale_max_n=scale_max_n, device_configs=lambda: [device])
+    server = MetricsServer(make_registry(holder.get, CollectorRegistry()), "127.0.0.1", 0, None, page.install)
+
+    async def publish() -> None:
+        state = proc.initial_state()
+        for seq in range(1, 1_000_000):
+            now = time.time()
+            snap, state = proc.process(state, RawSample(resistance_ohm=r, device_time_s=seq * 0.05), now, now)
+            holder.publish(GatewaySnapshot.build({"arr": snap}, {}, seq))
+            await asyncio.sleep(0.05)
+
+    with server:
+        feeder = asyncio.create_task(publish())
+        try:
+            yield server
+        finally:
+            feeder.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await feeder

@@ -3,6 +3,9 @@
 // device at most ~30/s). Draws a colour map of forces at the channels' configured positions
 // (y grows downward), channel statuses, the centre of pressure with a short trail, total
 // force and contact area over the last 30 s, and the device's health.
+// The colour scale is in force (N) or pressure (kPa: force over the layout's cell area), its
+// top follows the frame's peak (auto, with hysteresis) or is fixed; settings come from the
+// URL (?scale=auto|fixed&max=2.5&unit=N|kPa&numbers=1) and the controls write them back.
 "use strict";
 
 const ST = { OK: 0, NO_CONTACT: 1, SATURATED: 2, OPEN: 3, SHORT: 4, STALE: 5, ERROR: 6, EXTRAPOLATED: 7 };
@@ -12,6 +15,16 @@ const VALUED = new Set([ST.OK, ST.NO_CONTACT, ST.SATURATED, ST.EXTRAPOLATED]);
 const EXTRAPOLATED_COLOUR = "#3fd0c9";
 const HISTORY_S = 30;
 const TRAIL_S = 2;
+// auto-range: the top is a "nice" value just above the peak; it grows at once and shrinks only
+// after the peak has stayed under SHRINK_BELOW of it for SHRINK_AFTER_MS (no flicker)
+const NICE = [1, 1.5, 2, 2.5, 3, 4, 5, 6, 8, 10];
+const AUTO_HEADROOM = 1.1;
+const AUTO_FLOOR_N = 0.1;
+const SHRINK_BELOW = 0.45;
+const SHRINK_AFTER_MS = 1500;
+// a disabled channel (off in the configuration, never polled): a crossed dark cell
+const DISABLED_FILL = "#1c2026";
+const DISABLED_CROSS = "#6b7480";
 // a perceptual dark-to-bright map (inferno-like): 0 N is near black, the scale's top is pale yellow
 const STOPS = [
   [0.0, [0, 0, 4]], [0.15, [40, 11, 84]], [0.3, [101, 21, 110]], [0.45, [159, 42, 99]],
@@ -22,6 +35,9 @@ const devices = new Map(); // name -> device state
 let selected = null;
 let dirty = true;
 let lastDraw = 0;
+let lastKey = "";
+// the view's settings; read from the URL at start, written back on change
+const view = { mode: "auto", max: null, unit: "N", numbers: false };
 
 function $(id) { return document.getElementById(id); }
 
@@ -39,11 +55,89 @@ function colour(f, max) {
 }
 function rgb(c) { return `rgb(${c[0]},${c[1]},${c[2]})`; }
 function fmt(x, digits) { return x === null || x === undefined ? "–" : x.toFixed(digits); }
+function niceCeil(x) {
+  const e = Math.pow(10, Math.floor(Math.log10(x)));
+  for (const m of NICE) if (m * e >= x * (1 - 1e-9)) return m * e;
+  return 10 * e;
+}
+function fmtValue(v) {
+  const a = Math.abs(v);
+  return v.toFixed(a >= 100 ? 0 : a >= 10 ? 1 : 2);
+}
+
+// ---------------------------------------------------------------- scale and units
+// N -> the shown unit's value for one channel (null where there is no value)
+function toUnit(d, force) {
+  if (force === null || force === undefined) return null;
+  if (view.unit === "kPa") return d.layout.cell_area_mm2 ? (force * 1000) / d.layout.cell_area_mm2 : null;
+  return force;
+}
+function unitLabel() { return view.unit === "kPa" ? "kPa" : "N"; }
+function defaultMax(d) { return toUnit(d, d.layout.scale_n[1]) || d.layout.scale_n[1]; }
+// the top of the colour scale for a device, in the shown unit
+function scaleMax(d) {
+  if (view.mode === "fixed") return view.max !== null ? view.max : defaultMax(d);
+  return d.auto && d.auto.unit === view.unit ? d.auto.max : defaultMax(d);
+}
+function framePeak(d, f) {
+  let peak = 0;
+  f.status.forEach((s, k) => {
+    const v = VALUED.has(s) ? toUnit(d, f.force_n[k]) : null;
+    if (v !== null && v > peak) peak = v;
+  });
+  return peak;
+}
+function updateAuto(d, now) {
+  // a device that is down has no forces: its last range is kept until it answers again
+  if (!d.frame || (!d.frame.up && d.auto && d.auto.unit === view.unit)) return;
+  const peak = framePeak(d, d.frame);
+  const floor = toUnit(d, AUTO_FLOOR_N) || AUTO_FLOOR_N;
+  const want = niceCeil(Math.max(peak * AUTO_HEADROOM, floor));
+  const a = d.auto;
+  if (!a || a.unit !== view.unit || want > a.max) {
+    d.auto = { max: want, unit: view.unit, since: null };
+  } else if (peak * AUTO_HEADROOM < SHRINK_BELOW * a.max) {
+    if (a.since === null) a.since = now;
+    else if (now - a.since >= SHRINK_AFTER_MS) d.auto = { max: want, unit: view.unit, since: null };
+  } else {
+    a.since = null;
+  }
+}
+
+function readView() {
+  const q = new URLSearchParams(location.search);
+  view.unit = (q.get("unit") || "").toLowerCase() === "kpa" ? "kPa" : "N";
+  const max = Number.parseFloat(q.get("max") || "");
+  view.max = Number.isFinite(max) && max > 0 ? max : null;
+  const mode = q.get("scale");
+  view.mode = mode === "auto" || mode === "fixed" ? mode : view.max !== null ? "fixed" : "auto";
+  view.numbers = ["1", "true", "on", "yes"].includes((q.get("numbers") || "").toLowerCase());
+}
+function writeView() {
+  const q = new URLSearchParams(location.search);
+  q.set("scale", view.mode);
+  if (view.max !== null) q.set("max", String(view.max)); else q.delete("max");
+  q.set("unit", view.unit);
+  if (view.numbers) q.set("numbers", "1"); else q.delete("numbers");
+  history.replaceState(null, "", `${location.pathname}?${q}${location.hash}`);
+}
+function showControls() {
+  $("scale-mode").value = view.mode;
+  $("unit").value = view.unit;
+  $("numbers").checked = view.numbers;
+  $("scale-max-unit").textContent = unitLabel();
+  const d = selected && devices.get(selected);
+  if (document.activeElement !== $("scale-max")) {
+    $("scale-max").value = view.max !== null ? String(view.max) : "";
+    $("scale-max").placeholder = d ? fmtValue(defaultMax(d)) : "";
+  }
+}
 
 // ---------------------------------------------------------------- layout
 function geometry(layout) {
-  const xs = layout.channels.map((c) => c.x_mm);
-  const ys = layout.channels.map((c) => c.y_mm);
+  const all = layout.channels.concat(layout.disabled_channels || []);
+  const xs = all.map((c) => c.x_mm);
+  const ys = all.map((c) => c.y_mm);
   let pitch = Infinity;
   for (let i = 0; i < xs.length; i++) {
     for (let j = i + 1; j < xs.length; j++) {
@@ -76,6 +170,7 @@ async function loadDevices() {
     const old = devices.get(layout.name);
     devices.set(layout.name, {
       layout, geo: geometry(layout), frame: old ? old.frame : null, arrived: old ? old.arrived : 0,
+      auto: old ? old.auto : null,
       history: old ? old.history : [], trail: old ? old.trail : [], polls: old ? old.polls : [],
     });
   }
@@ -101,6 +196,7 @@ function onFrame(f) {
     if (f.cop_mm) d.trail.push([f.t, f.cop_mm[0], f.cop_mm[1]]);
     while (d.trail.length && d.trail[0][0] < f.t - TRAIL_S) d.trail.shift();
   }
+  updateAuto(d, now);
   d.polls.push([now, f.polls_total]);
   while (d.polls.length > 2 && d.polls[0][0] < now - 3000) d.polls.shift();
   dirty = true;
@@ -131,20 +227,28 @@ function drawMap(canvas, d, opts) {
   const geo = d.geo;
   const tr = transform(geo, w, h, opts.margin);
   const f = d.frame;
-  const max = d.layout.scale_n[1];
+  const max = scaleMax(d);
   const side = tr.s * geo.pitch * 0.92;
+  let numbers = 0;
   const stale = deviceState(d, performance.now()) === "stale";
   if (opts.smooth && f) drawSmooth(ctx, d, tr, max);
   d.layout.channels.forEach((c, k) => {
     const status = f ? f.status[k] : ST.STALE;
-    const force = f ? f.force_n[k] : null;
+    const value = f ? toUnit(d, f.force_n[k]) : null;
     const x = tr.px(c.x_mm) - side / 2;
     const y = tr.py(c.y_mm) - side / 2;
     let label = null;
+    let number = null;
+    let ink = "#fff";
     if (VALUED.has(status)) {
+      const fill = colour(value || 0, max);
       if (!opts.smooth) {
-        ctx.fillStyle = rgb(colour(force || 0, max));
+        ctx.fillStyle = rgb(fill);
         ctx.fillRect(x, y, side, side);
+      }
+      if (opts.numbers && value !== null) {
+        number = fmtValue(value);
+        ink = opts.smooth || 0.3 * fill[0] + 0.59 * fill[1] + 0.11 * fill[2] < 140 ? "#fff" : "#000";
       }
       if (status === ST.SATURATED) {
         ctx.strokeStyle = "#fff";
@@ -172,15 +276,49 @@ function drawMap(canvas, d, opts) {
       ctx.fillStyle = "rgba(58,64,72,0.7)";
       ctx.fillRect(x, y, side, side);
     }
+    ctx.textAlign = "center";
+    ctx.textBaseline = "middle";
     if (label && side > 26) {
       ctx.fillStyle = "#fff";
       ctx.font = `${Math.max(9, Math.min(16, side / 5))}px sans-serif`;
-      ctx.textAlign = "center";
-      ctx.textBaseline = "middle";
-      ctx.fillText(label, x + side / 2, y + side / 2);
+      ctx.fillText(label, x + side / 2, y + side / (number ? 3 : 2));
+    }
+    if (number && side > 20) {
+      ctx.fillStyle = ink;
+      ctx.font = `bold ${Math.max(9, Math.min(18, side / 4.2))}px sans-serif`;
+      ctx.fillText(number, x + side / 2, y + (label ? (2 * side) / 3 : side / 2));
+      numbers++;
     }
   });
+  (d.layout.disabled_channels || []).forEach((c) => {
+    const x = tr.px(c.x_mm) - side / 2;
+    const y = tr.py(c.y_mm) - side / 2;
+    drawDisabled(ctx, x, y, side);
+  });
+  canvas.dataset.numbers = String(numbers);
   if (f && opts.trail) drawTrail(ctx, d, tr, f);
+}
+
+function drawDisabled(ctx, x, y, side) {
+  ctx.fillStyle = DISABLED_FILL;
+  ctx.fillRect(x, y, side, side);
+  ctx.save();
+  ctx.strokeStyle = DISABLED_CROSS;
+  ctx.lineWidth = Math.max(2, side / 16);
+  const m = side * 0.18;
+  ctx.beginPath();
+  ctx.moveTo(x + m, y + m); ctx.lineTo(x + side - m, y + side - m);
+  ctx.moveTo(x + side - m, y + m); ctx.lineTo(x + m, y + side - m);
+  ctx.stroke();
+  ctx.strokeRect(x + 1, y + 1, side - 2, side - 2);
+  ctx.restore();
+  if (side > 26) {
+    ctx.fillStyle = "#c8ced6";
+    ctx.font = `${Math.max(9, Math.min(14, side / 5))}px sans-serif`;
+    ctx.textAlign = "center";
+    ctx.textBaseline = "middle";
+    ctx.fillText("OFF", x + side / 2, y + side / 2);
+  }
 }
 
 function hatch(ctx, x, y, side, a, b) {
@@ -211,7 +349,7 @@ function drawSmooth(ctx, d, tr, max) {
   const pts = [];
   d.layout.channels.forEach((c, k) => {
     const s = f.status[k];
-    if (VALUED.has(s)) pts.push([c.x_mm, c.y_mm, f.force_n[k] || 0]);
+    if (VALUED.has(s)) pts.push([c.x_mm, c.y_mm, toUnit(d, f.force_n[k]) || 0]);
   });
   for (let j = 0; j < n; j++) {
     const ym = geo.y0 + ((j + 0.5) / n) * (geo.y1 - geo.y0);
@@ -261,7 +399,7 @@ function drawTrail(ctx, d, tr, f) {
   }
 }
 
-function drawScale(canvas, max) {
+function drawScale(canvas, max, title) {
   const ctx = canvas.getContext("2d");
   const w = canvas.width;
   const h = canvas.height;
@@ -276,11 +414,12 @@ function drawScale(canvas, max) {
   ctx.font = "12px sans-serif";
   ctx.textAlign = "left";
   ctx.textBaseline = "middle";
-  ctx.fillText("force, N", 4, 10);
+  ctx.fillText(title, 4, 10);
   for (let k = 0; k <= 5; k++) {
     const y = bottom - (k / 5) * (bottom - top);
     ctx.fillRect(30, y, 5, 1);
-    ctx.fillText(((k / 5) * max).toFixed(max >= 10 ? 0 : 1), 38, y);
+    const v = (k / 5) * max;
+    ctx.fillText(v.toFixed(max >= 50 ? 0 : max >= 5 ? 1 : max >= 0.5 ? 2 : 3), 38, y);
   }
 }
 
@@ -333,6 +472,8 @@ function updateText(d, now) {
   const st = deviceState(d, now);
   $("state").textContent = st;
   $("state").className = `state ${st}`;
+  $("summary").classList.toggle("stale", st === "stale");
+  $("summary-old").hidden = st !== "stale";
   if (!f) return;
   $("total-force").textContent = fmt(f.total_force_n, 3);
   $("cop-x").textContent = f.cop_mm ? fmt(f.cop_mm[0], 2) : "–";
@@ -341,6 +482,7 @@ function updateText(d, now) {
   $("in-contact").textContent = String(f.channels_in_contact);
   $("peak").textContent = f.peak_channel ? `${f.peak_channel} ${fmt(f.peak_force_n, 3)} N` : "–";
   $("health-up").textContent = f.up ? "up" : `not answering${f.error ? ": " + f.error : ""}`;
+  $("health-up").title = $("health-up").textContent;
   const p = d.polls;
   const rate = p.length > 1 && p[p.length - 1][0] > p[0][0]
     ? ((p[p.length - 1][1] - p[0][1]) * 1000) / (p[p.length - 1][0] - p[0][0]) : null;
@@ -348,6 +490,8 @@ function updateText(d, now) {
   $("read-errors").textContent = String(f.read_errors_total);
   const age = f.last_success_t === null ? null : f.t - f.last_success_t + (now - d.arrived) / 1000;
   $("poll-age").textContent = fmt(age, 1);
+  $("summary-old").textContent = st === "stale"
+    ? `old: stale${age === null ? "" : `, last good poll ${fmt(age, 1)} s ago`}` : "";
   $("seq").textContent = String(f.seq);
 }
 
@@ -382,9 +526,23 @@ function route() {
   $("detail").hidden = selected === null;
   if (selected) {
     $("dev-name").textContent = selected;
-    drawScale($("scale"), devices.get(selected).layout.scale_n[1]);
+    lastKey = "";
   }
   dirty = true;
+}
+
+// the colour key: redrawn when its range, unit or mode changes
+function drawKey(d) {
+  const max = scaleMax(d);
+  const title = view.unit === "kPa" ? "pressure, kPa" : "force, N";
+  const key = `${max} ${view.unit} ${view.mode}`;
+  if (key === lastKey) return;
+  lastKey = key;
+  drawScale($("scale"), max, title);
+  $("scale").setAttribute("aria-label", `colour scale, ${title}`);
+  $("scale-range").textContent = `0–${fmtValue(max)} ${unitLabel()} (${view.mode})`;
+  $("map").dataset.max = String(max);
+  showControls();
 }
 
 function render() {
@@ -394,7 +552,8 @@ function render() {
     lastDraw = now;
     if (selected && devices.has(selected)) {
       const d = devices.get(selected);
-      drawMap($("map"), d, { margin: 12, smooth: $("smooth").checked, trail: true });
+      drawKey(d);
+      drawMap($("map"), d, { margin: 12, smooth: $("smooth").checked, trail: true, numbers: view.numbers });
       drawHistory($("history"), d);
       updateText(d, now);
     } else {
@@ -431,7 +590,10 @@ function hover(ev) {
   const f = d.frame;
   const status = d.layout.status_labels[f.status[best]] || "?";
   const force = f.force_n[best];
-  tip.textContent = `${c.name} (${c.x_mm}, ${c.y_mm} mm): ${force === null ? "no value" : force.toFixed(3) + " N"}, ${status}`;
+  const kpa = force === null || !d.layout.cell_area_mm2 ? null : (force * 1000) / d.layout.cell_area_mm2;
+  const value = force === null ? "no value"
+    : `${force.toFixed(3)} N${view.unit === "kPa" && kpa !== null ? `, ${kpa.toFixed(1)} kPa` : ""}`;
+  tip.textContent = `${c.name} (${c.x_mm}, ${c.y_mm} mm): ${value}, ${status}`;
   tip.style.left = `${ev.clientX - rect.left + 14}px`;
   tip.style.top = `${ev.clientY - rect.top + 14}px`;
   tip.hidden = false;
@@ -447,6 +609,23 @@ function main() {
   $("map").addEventListener("mousemove", hover);
   $("map").addEventListener("mouseleave", () => { $("tooltip").hidden = true; });
   $("smooth").addEventListener("change", () => { dirty = true; });
+  readView();
+  showControls();
+  const changed = () => { writeView(); showControls(); lastKey = ""; dirty = true; };
+  $("scale-mode").addEventListener("change", () => { view.mode = $("scale-mode").value; changed(); });
+  $("unit").addEventListener("change", () => {
+    view.unit = $("unit").value;
+    view.max = null; // a maximum is in its unit
+    for (const d of devices.values()) updateAuto(d, performance.now());
+    changed();
+  });
+  $("scale-max").addEventListener("change", () => {
+    const v = Number.parseFloat($("scale-max").value);
+    view.max = Number.isFinite(v) && v > 0 ? v : null;
+    if (view.max !== null) view.mode = "fixed";
+    changed();
+  });
+  $("numbers").addEventListener("change", () => { view.numbers = $("numbers").checked; changed(); });
   loadDevices().then(connect, (err) => { $("conn").textContent = `cannot load devices: ${err.message}`; });
   requestAnimationFrame(render);
 }

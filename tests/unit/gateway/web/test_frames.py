@@ -52,3 +52,24 @@ def test_with_dropped_prefixes_the_count_without_decoding() -> None:
     frame = encode_frame(device(), 1, None)
     data = json.loads(with_dropped(frame, 17))
     assert data["dropped"] == 17 and data == {**json.loads(frame), "dropped": 17}
+
+
+def test_layout_gives_the_cell_area_and_disabled_channels_from_the_configuration() -> None:
+    from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
+    from gateway.config.layout import GridLayout
+    from gateway.model import PAPER_EFFECTS, Divider, SensorParams
+
+    channels = tuple(
+        ChannelConfig(k, f"ch{k:02d}", (k % 2) * 2.0, (k // 2) * 3.0, k != 1, PAPER_EFFECTS, SensorParams())
+        for k in range(4)
+    )
+    config = DeviceConfig("arr", 1, "float32", 4, RegisterMap(), Divider(), channels, False,
+                          GridLayout(4, 2, 2.0, 3.0), None)  # fmt: skip
+    layout = layout_json(device(), 5.0, config)
+    assert layout["cell_area_mm2"] == 6.0 and layout["units"]["pressure"] == "kPa"
+    assert layout["disabled_channels"] == [{"index": 1, "name": "ch01", "x_mm": 2.0, "y_mm": 0.0}]
+
+
+def test_without_the_configuration_the_cell_area_comes_from_the_positions() -> None:
+    layout = layout_json(device(), 5.0)  # a 2 x 2 grid at a 2.5 mm pitch
+    assert layout["cell_area_mm2"] == 6.25 and layout["disabled_channels"] is None

@@ -1,5 +1,6 @@
 """The page knows every channel status: its code table matches ``ChannelStatus``, the legend
-lists each status it draws apart, and an extrapolated channel is drawn with its force."""
+lists each status it draws apart (and disabled channels), and an extrapolated channel is
+drawn with its force."""
 
 from __future__ import annotations
 
@@ -28,7 +29,9 @@ def test_the_legend_lists_every_status_but_ok_with_a_swatch() -> None:
     html = (STATIC / "index.html").read_text(encoding="utf-8")
     css = (STATIC / "style.css").read_text(encoding="utf-8")
     swatches = re.findall(r'<span class="sw sw-([a-z]+)"></span>', html)
-    assert swatches == ["nocontact", "saturated", "extrapolated", "open", "short", "stale", "error"]
+    # every status, then a channel that is no status at all: off in the configuration
+    statuses = ["nocontact", "saturated", "extrapolated", "open", "short", "stale", "error"]
+    assert swatches == [*statuses, "disabled"]
     for name in swatches:
         assert f".sw-{name} {{" in css, name
     assert "extrapolated (outside the calibrated range)" in html
