@@ -35,8 +35,7 @@ from typing import Any
 
 from aiohttp import web
 
-from ..config.schema import DeviceConfig
-from .frames import encode_frame, layout_json, with_dropped
+from .frames import DeviceDescription, encode_frame, layout_json, with_dropped
 from .hub import FrameHub
 
 #: The page's policy: nothing but its own files and its own API; no inline anything.
@@ -72,7 +71,7 @@ class WebPage:
         scale_max_n: float = 5.0,
         clock: Callable[[], float] = time.monotonic,
         write_timeout_s: float = WRITE_TIMEOUT_S,
-        device_configs: Callable[[], Iterable[DeviceConfig]] | None = None,
+        device_configs: Callable[[], Iterable[DeviceDescription]] | None = None,
     ) -> None:
         self.hub = hub
         #: the devices' configurations as now in force (a reload changes them), for what the

@@ -12,10 +12,9 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from collections.abc import Iterable
-from typing import Any
+from collections.abc import Iterable, Sequence
+from typing import Any, Protocol
 
-from ..config.schema import DeviceConfig
 from ..runtime.counters import DeviceCounters
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
@@ -65,8 +64,40 @@ def cell_area_from_positions(x_mm: Iterable[float], y_mm: Iterable[float]) -> fl
     return float((sx or sy or 0.0) * (sy or sx or 0.0))
 
 
+class ChannelDescription(Protocol):
+    """What the page needs of a configured channel (``config.ChannelConfig`` is one)."""
+
+    @property
+    def index(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def x_mm(self) -> float: ...
+    @property
+    def y_mm(self) -> float: ...
+    @property
+    def enabled(self) -> bool: ...
+
+
+class LayoutDescription(Protocol):
+    @property
+    def cell_area_mm2(self) -> float: ...
+
+
+class DeviceDescription(Protocol):
+    """What the page needs of a device's configuration (``config.DeviceConfig`` is one: the
+    web layer names no configuration type, so that it imports only the runtime)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def layout(self) -> LayoutDescription: ...
+    @property
+    def channels(self) -> Sequence[ChannelDescription]: ...
+
+
 def layout_json(
-    dev: DeviceSnapshot, scale_max_n: float, config: DeviceConfig | None = None
+    dev: DeviceSnapshot, scale_max_n: float, config: DeviceDescription | None = None
 ) -> dict[str, Any]:
     """The static description of a device: channels, positions (mm, y grows downward as
     drawn), units, the status labels by code, the page's default colour scale (N), the area
