@@ -33,6 +33,7 @@ record becomes 12 s.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shlex
@@ -178,7 +179,9 @@ def wait_until(
             pytest.fail(f"{what} exited with {proc.returncode} before it was up:\n{log()}", pytrace=False)
         if time.monotonic() > deadline:
             pytest.fail(f"{what} was not up after {UP_TIMEOUT_S:.0f} s:\n{log()}", pytrace=False)
-        time.sleep(0.1)
+        # wait on the process itself between looks: an exit ends the wait at once
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            proc.wait(timeout=0.1)
 
 
 def port_open(port: int) -> bool:
