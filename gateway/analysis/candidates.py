@@ -394,13 +394,18 @@ def _refine(
 
 
 def hold_drift_pct(
-    time_s: FloatArray, reference_n: FloatArray, force_n: FloatArray, rows: BoolArray, full_scale: float
+    time_s: FloatArray,
+    reference_n: FloatArray,
+    force_n: FloatArray,
+    rows: BoolArray,
+    full_scale: float,
+    holds: Sequence[Hold] | None = None,
 ) -> float:
     """RMS over the holds inside ``rows`` of ``hold_change_n``, as % of ``full_scale``; NaN
-    without a hold."""
+    without a hold. ``holds``: the reference's holds when already found (``find_holds``)."""
     tolerance = hold_tolerance_n(reference_n)
     changes = []
-    for h in find_holds(time_s, reference_n, tolerance):
+    for h in find_holds(time_s, reference_n, tolerance) if holds is None else holds:
         if not rows[h.start : h.stop].all():
             continue
         change = hold_change_n(reference_n, force_n, h, tolerance)
@@ -421,7 +426,9 @@ def hold_change_n(reference_n: FloatArray, force_n: FloatArray, hold: Hold, tole
     return b - a
 
 
-def score(data: FitData, name: str, channel: CurveChannel, full_scale: float) -> Candidate:
+def score(
+    data: FitData, name: str, channel: CurveChannel, full_scale: float, holds: Sequence[Hold] | None = None
+) -> Candidate:
     """Track the whole record with ``channel`` and score it on the held-out rows."""
     force, _ = track_series(channel, data.resistance_ohm, data.time_s)
     err = force - data.force_n
@@ -429,7 +436,7 @@ def score(data: FitData, name: str, channel: CurveChannel, full_scale: float) ->
         name=name,
         channel=channel,
         held_out_force_rms_n=rms(err[data.test]),
-        hold_drift_pct_fs=hold_drift_pct(data.time_s, data.force_n, force, data.test, full_scale),
+        hold_drift_pct_fs=hold_drift_pct(data.time_s, data.force_n, force, data.test, full_scale, holds),
         train_force_rms_n=rms(err[data.train]),
         force_n=force,
     )
@@ -449,6 +456,7 @@ def rank_candidates(
         chosen = [f for f in chosen if DRIFT_FORMS[f][0] == 0]
     out: list[Candidate] = []
     fitted: dict[tuple[str, str], CurveChannel] = {}
+    holds = find_holds(data.time_s, data.force_n, hold_tolerance_n(data.force_n))  # once, for all
     for kind in kinds:
         for form in chosen:
             nested = fitted.get((kind, form.replace("creep2", "creep")))
@@ -457,7 +465,7 @@ def rank_candidates(
             except (ValueError, np.linalg.LinAlgError):
                 continue
             fitted[(kind, form)] = ch
-            out.append(score(data, f"{kind} + {form}", ch, reg.full_scale))
+            out.append(score(data, f"{kind} + {form}", ch, reg.full_scale, holds))
     return sorted(
         out, key=lambda c: c.held_out_force_rms_n if math.isfinite(c.held_out_force_rms_n) else math.inf
     )

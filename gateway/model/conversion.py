@@ -24,14 +24,14 @@ vectorised over its channels.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .curves import CurveChannel, CurveError, curve_from_table
+from .curves import CurveChannel, CurveError, KnotTable, curve_from_table
+from .curves import finite_value as _finite
 from .inversion import ForceStatus
 
 __all__ = [
@@ -70,19 +70,9 @@ ZERO_FORCE_N = 1e-9
 _SHORT_RAIL_OHM = float(np.finfo(np.float64).tiny)
 
 
-class ConversionError(ValueError):
-    """A conversion's value outside its allowed range; ``key`` names the offending field."""
-
-    def __init__(self, key: str, message: str) -> None:
-        super().__init__(f"{key}: {message}")
-        self.key = key
-        self.message = message
-
-
-def _finite(key: str, value: object, unit: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ConversionError(key, f"{value!r} is out of range; allowed: a finite number ({unit})")
-    return float(value)
+#: A conversion's value outside its allowed range (``key`` names the field): the curves'
+#: error, one type for every calibration table.
+ConversionError = CurveError
 
 
 @dataclass(frozen=True)
@@ -196,10 +186,7 @@ def conversion_from_table(
     a line without its own force range takes the channel's (``force_min_n``/``force_max_n``).
     ``ConversionError`` names the key."""
     if kind == "curve":
-        try:
-            return curve_from_table(data)
-        except CurveError as exc:
-            raise ConversionError(exc.key, exc.message) from None
+        return curve_from_table(data)
     allowed = _LINE_KEYS if kind == "line" else _LOOKUP_KEYS
     for key in data:
         if key not in allowed:
@@ -246,43 +233,14 @@ class ConversionSet:
         #: lines with n < 0 read no contact below their lower bound (no phantom force at rest)
         self.line_floor = self.intercept < 0.0
         self.lookup_pos = np.array([k for k, _ in lookups], dtype=np.intp)
-        # knots padded to the longest table: ln R with +inf, force with the last value
-        width = max((len(c.force_n) for _, c in lookups), default=2)
-        self.log_r = np.full((len(lookups), width), np.inf)
-        self.knot_f = np.zeros((len(lookups), width))
-        self.last = np.array([len(c.force_n) - 1 for _, c in lookups], dtype=np.intp)
-        for i, (_, c) in enumerate(lookups):
-            self.log_r[i, : len(c.force_n)] = np.log(c.resistance_ohm)
-            self.knot_f[i] = c.force_n[-1]
-            self.knot_f[i, : len(c.force_n)] = c.force_n
-        rows = np.arange(len(lookups))
-        self.lookup_high = self.knot_f[:, 0].copy()
-        self.lookup_low = np.maximum(self.knot_f[rows, self.last], 0.0)
-        # the end segments a lookup extends along: at each end, from the end knot to the
-        # nearest knot of another force. A flat end (a bench's holds give bins of equal
-        # median force) extended flat would read the end force at any resistance beyond it,
-        # a phantom force at rest; the sloped segment reaches 0 N where the baseline
-        # correction puts a channel at rest (``unloaded_conductance_s``).
-        low_other = [int(np.flatnonzero(np.asarray(c.force_n) > c.force_n[-1])[-1]) for _, c in lookups]
-        high_other = [int(np.flatnonzero(np.asarray(c.force_n) < c.force_n[0])[0]) for _, c in lookups]
-        self.low_end = self._end_line(rows, self.last, np.array(low_other, dtype=np.intp))
-        self.high_end = self._end_line(
-            rows, np.zeros(len(lookups), dtype=np.intp), np.array(high_other, dtype=np.intp)
-        )
+        self.knots = KnotTable([(c.resistance_ohm, c.force_n) for _, c in lookups])
+        self.lookup_high = self.knots.high_n
+        self.lookup_low = np.maximum(self.knots.low_n, 0.0)
         self.positions = np.concatenate([self.line_pos, self.lookup_pos])
         self.unloaded_ohm = np.array(
             [1.0 / g if g > 0.0 else np.inf for g in (c.unloaded_conductance_s for _, c in lines + lookups)],
             dtype=np.float64,
         )
-
-    def _end_line(
-        self, rows: NDArray[np.intp], end: NDArray[np.intp], other: NDArray[np.intp]
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Per lookup: the end knot's ln R and force, and the slope dF/d(ln R) (< 0) of the
-        segment from it to the knot ``other``."""
-        x0, f0 = self.log_r[rows, end], self.knot_f[rows, end]
-        x1, f1 = self.log_r[rows, other], self.knot_f[rows, other]
-        return x0, f0, (f1 - f0) / (x1 - x0)
 
     def apply(self, resistance_ohm: FloatArray, force_n: FloatArray, status: StatusArray) -> None:
         """Write force (N) and ``ForceStatus`` of the converted channels into the device's arrays."""
@@ -299,23 +257,10 @@ class ConversionSet:
                 )
             if self.lookup_pos.size:
                 r = resistance_ohm[self.lookup_pos]
-                f = self._interpolate(np.log(r))
+                f = self.knots.force(np.log(r))
                 force_n[self.lookup_pos], status[self.lookup_pos] = self._classify(
                     f, r, f <= ZERO_FORCE_N, (f < self.lookup_low) | (f > self.lookup_high), self.lookup_high
                 )
-
-    def _interpolate(self, x: FloatArray) -> FloatArray:
-        """Linear in ln R between each table's knots, and beyond its ends along its end
-        segments; an open sensor (ln R = +inf) reads -inf N, a NaN stays NaN."""
-        rows = np.arange(x.size)
-        above = np.count_nonzero(self.log_r <= x[:, None], axis=1)  # knots at or below x
-        j = np.clip(above, 1, self.last)
-        x0, x1 = self.log_r[rows, j - 1], self.log_r[rows, j]
-        f0, f1 = self.knot_f[rows, j - 1], self.knot_f[rows, j]
-        t = np.clip((x - x0) / (x1 - x0), 0.0, 1.0)
-        inside = f0 * (1.0 - t) + f1 * t  # exactly a knot's force at t = 0 and 1
-        (lx, lf, ls), (hx, hf, hs) = self.low_end, self.high_end
-        return np.asarray(np.where(x > lx, lf + ls * (x - lx), np.where(x < hx, hf + hs * (x - hx), inside)))
 
     @staticmethod
     def _classify(

@@ -104,14 +104,15 @@ class CurveError(ValueError):
         self.message = message
 
 
-def _finite(key: str, value: object, unit: str) -> float:
+def finite_value(key: str, value: object, unit: str) -> float:
+    """``value`` as a float, or ``CurveError`` naming ``key`` if it is not a finite number."""
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise CurveError(key, f"{value!r} is out of range; allowed: a finite number ({unit})")
     return float(value)
 
 
 def _positive(key: str, value: object, unit: str) -> float:
-    v = _finite(key, value, unit)
+    v = finite_value(key, value, unit)
     if not v > 0.0:
         raise CurveError(key, f"{v!r} is out of range; allowed: (0, inf) {unit}")
     return v
@@ -133,7 +134,7 @@ class PowerLawCurve:
 
     def __post_init__(self) -> None:
         _positive("coefficient_s", self.coefficient_s, "S/N^n")
-        e = _finite("exponent", self.exponent, "")
+        e = finite_value("exponent", self.exponent, "")
         if not 0.0 < e <= 10.0:
             raise CurveError("exponent", f"{e!r} is out of range; allowed: (0, 10]")
 
@@ -166,7 +167,7 @@ class LineCurve:
 
     def __post_init__(self) -> None:
         _positive("slope_s_per_n", self.slope_s_per_n, "S/N")
-        _finite("intercept_s", self.intercept_s, "S")
+        finite_value("intercept_s", self.intercept_s, "S")
 
     def force(self, resistance_ohm: ArrayLike) -> FloatArray:
         """x = (G - c) / m in N (an open sensor reads -c/m)."""
@@ -204,7 +205,7 @@ class LookupCurve:
                 "force_n", f"{len(self.force_n)} forces for {len(self.resistance_ohm)} resistances"
             )
         r = [_positive(f"resistance_ohm[{i}]", v, "ohm") for i, v in enumerate(self.resistance_ohm)]
-        f = [_finite(f"force_n[{i}]", v, "N") for i, v in enumerate(self.force_n)]
+        f = [finite_value(f"force_n[{i}]", v, "N") for i, v in enumerate(self.force_n)]
         for i in range(1, len(r)):
             if not r[i] > r[i - 1]:
                 raise CurveError(f"resistance_ohm[{i}]", f"{r[i]!r} after {r[i - 1]!r}: must increase")
@@ -214,20 +215,12 @@ class LookupCurve:
             raise CurveError("force_n", f"all forces are {f[0]!r}: the lookup needs a force range")
 
     def force(self, resistance_ohm: ArrayLike) -> FloatArray:
+        """x by the table (``KnotTable``): an open sensor reads -inf N (no contact)."""
         r = np.asarray(resistance_ohm, dtype=np.float64)
-        lr = np.log(np.asarray(self.resistance_ohm))
-        fk = np.asarray(self.force_n)
         with np.errstate(divide="ignore", invalid="ignore"):
-            x = np.where(r > 0.0, np.log(np.where(r > 0.0, r, 1.0)), np.nan)
-        n = x.size
-        flat = x.reshape(-1)
-        out = interpolate_knots(
-            flat,
-            np.broadcast_to(lr, (n, lr.size)),
-            np.broadcast_to(fk, (n, fk.size)),
-            np.full(n, lr.size - 1),
-        )
-        return out.reshape(x.shape)
+            x = np.where(r > 0.0, np.log(np.where(r > 0.0, r, 1.0)), np.nan).reshape(-1)
+        table = KnotTable([(self.resistance_ohm, self.force_n)])
+        return table.force(x, np.zeros(x.size, dtype=np.intp)).reshape(r.shape)
 
     def resistance(self, force_n: ArrayLike) -> FloatArray:
         f = np.asarray(force_n, dtype=np.float64)
@@ -246,20 +239,63 @@ class LookupCurve:
 StaticCurve = PowerLawCurve | LineCurve | LookupCurve
 
 
-def interpolate_knots(
-    x: FloatArray, log_r: FloatArray, knot_f: FloatArray, last: NDArray[np.intp]
-) -> FloatArray:
-    """Force at ln R = ``x[i]`` on row i's knots (``log_r[i]`` increasing, padded with +inf
-    past ``last[i]``), linear in ln R between them and along the end segments beyond them;
-    an open sensor (ln R = +inf) reads no more than 0 N."""
-    idx = np.arange(x.size)
-    above = np.count_nonzero(log_r <= x[:, None], axis=1)
-    j = np.clip(above, 1, last)
-    x0, x1 = log_r[idx, j - 1], log_r[idx, j]
-    f0, f1 = knot_f[idx, j - 1], knot_f[idx, j]
-    with np.errstate(invalid="ignore", over="ignore"):
-        out = f0 + (f1 - f0) * ((x - x0) / (x1 - x0))
-    return np.asarray(np.where(x == np.inf, np.minimum(knot_f[idx, last], 0.0), out))
+class KnotTable:
+    """Lookup tables, one per row, as padded arrays: force against ln R through each table's
+    knots (resistance increasing, force non-increasing), linear between them and, beyond
+    them, along the end segments. An end segment runs from the end knot to the nearest knot
+    of another force: a flat end (a bench's holds give bins of equal median force) extended
+    flat would read the end force at any resistance beyond it, a phantom force at rest. An
+    open sensor (ln R = +inf) reads -inf N (no contact), a NaN stays NaN. Shared by the
+    curves and the runtime's stateless lookups (``conversion.ConversionSet``)."""
+
+    def __init__(self, tables: Sequence[tuple[Sequence[float], Sequence[float]]]) -> None:
+        width = max((len(f) for _, f in tables), default=2)
+        n = len(tables)
+        self.log_r = np.full((n, width), np.inf)
+        self.knot_f = np.zeros((n, width))
+        self.last = np.array([max(len(f) - 1, 1) for _, f in tables], dtype=np.intp)
+        low_other, high_other = np.ones(n, dtype=np.intp), np.zeros(n, dtype=np.intp)
+        for i, (r, f) in enumerate(tables):
+            self.log_r[i, : len(f)] = np.log(np.asarray(r, dtype=np.float64))
+            self.knot_f[i] = f[-1]
+            self.knot_f[i, : len(f)] = f
+            fa = np.asarray(f, dtype=np.float64)
+            low_other[i] = int(np.flatnonzero(fa > fa[-1])[-1])
+            high_other[i] = int(np.flatnonzero(fa < fa[0])[0])
+        rows = np.arange(n)
+        #: the highest and lowest force of each table (N)
+        self.high_n = self.knot_f[:, 0].copy()
+        self.low_n = self.knot_f[rows, self.last].copy()
+        self.low_end = self._end_line(rows, self.last, low_other)
+        self.high_end = self._end_line(rows, np.zeros(n, dtype=np.intp), high_other)
+
+    def _end_line(
+        self, rows: NDArray[np.intp], end: NDArray[np.intp], other: NDArray[np.intp]
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Per table: the end knot's ln R and force, and the slope dF/d(ln R) (< 0) of the
+        segment from it to the knot ``other``."""
+        x0, f0 = self.log_r[rows, end], self.knot_f[rows, end]
+        x1, f1 = self.log_r[rows, other], self.knot_f[rows, other]
+        return x0, f0, (f1 - f0) / (x1 - x0)
+
+    def force(self, log_r: FloatArray, rows: NDArray[np.intp] | None = None) -> FloatArray:
+        """The force (N) at ln R = ``log_r[k]`` on table ``rows[k]`` (default: table k)."""
+        x = np.asarray(log_r, dtype=np.float64)
+        rows = np.arange(x.size) if rows is None else rows
+        with np.errstate(invalid="ignore", over="ignore"):
+            log_r_k = self.log_r[rows]
+            above = np.count_nonzero(log_r_k <= x[:, None], axis=1)  # knots at or below x
+            j = np.clip(above, 1, self.last[rows])
+            x0, x1 = self.log_r[rows, j - 1], self.log_r[rows, j]
+            f0, f1 = self.knot_f[rows, j - 1], self.knot_f[rows, j]
+            t = np.clip((x - x0) / (x1 - x0), 0.0, 1.0)
+            inside = f0 * (1.0 - t) + f1 * t  # exactly a knot's force at t = 0 and 1
+            (lx, lf, ls), (hx, hf, hs) = (
+                tuple(v[rows] for v in end) for end in (self.low_end, self.high_end)
+            )
+            return np.asarray(
+                np.where(x > lx, lf + ls * (x - lx), np.where(x < hx, hf + hs * (x - hx), inside))
+            )
 
 
 @dataclass(frozen=True)
@@ -284,7 +320,7 @@ class Drift:
             ("creep2_fraction", -0.9, 5.0),
             ("hysteresis_fraction", -0.9, 0.9),
         ):
-            v = _finite(name, getattr(self, name), "")
+            v = finite_value(name, getattr(self, name), "")
             if not lo <= v <= hi:
                 raise CurveError(name, f"{v!r} is out of range; allowed: [{lo}, {hi}]")
         for name in ("creep_tau_s", "creep2_tau_s"):
@@ -323,7 +359,7 @@ class CurveChannel:
 
     def __post_init__(self) -> None:
         _positive("gain", self.gain, "")
-        _finite("offset_n", self.offset_n, "N")
+        finite_value("offset_n", self.offset_n, "N")
         low = self.force_min_n
         if isinstance(low, bool) or not isinstance(low, int | float) or math.isnan(low) or low < 0.0:
             raise CurveError("force_min_n", f"{low!r} is out of range; allowed: [0, inf) N")
@@ -367,19 +403,7 @@ class CurveState:
         return CurveState(self.z1[idx], self.z2[idx], self.play_n[idx], self.last_force_n[idx])
 
 
-def _lookup_tables(channels: Sequence[CurveChannel]) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
-    width = max((len(c.curve.force_n) for c in channels if isinstance(c.curve, LookupCurve)), default=2)
-    log_r = np.full((len(channels), width), np.inf)
-    knot_f = np.zeros((len(channels), width))
-    last = np.ones(len(channels), dtype=np.intp)
-    for i, c in enumerate(channels):
-        if isinstance(c.curve, LookupCurve):
-            n = len(c.curve.force_n)
-            log_r[i, :n] = np.log(c.curve.resistance_ohm)
-            knot_f[i] = c.curve.force_n[-1]
-            knot_f[i, :n] = c.curve.force_n
-            last[i] = n - 1
-    return log_r, knot_f, last
+_DUMMY: tuple[tuple[float, ...], tuple[float, ...]] = ((1.0, 2.0), (1.0, 0.0))
 
 
 class CurveSet:
@@ -403,7 +427,13 @@ class CurveSet:
         self.inv_n = np.array([1.0 / p.exponent for p in power], dtype=np.float64)
         self.m = np.array([x.slope_s_per_n for x in line], dtype=np.float64)
         self.c = np.array([x.intercept_s for x in line], dtype=np.float64)
-        self.log_r, self.knot_f, self.last = _lookup_tables(self.channels)
+        # every channel has a row (a dummy table where the curve is not a lookup)
+        self.knots = KnotTable(
+            [
+                (c.curve.resistance_ohm, c.curve.force_n) if isinstance(c.curve, LookupCurve) else _DUMMY
+                for c in chans
+            ]
+        )
         self.is_power = self.kind == 0
         self.is_line = self.kind == 1
         self.is_lookup = self.kind == 2
@@ -414,6 +444,8 @@ class CurveSet:
         self.tau2 = np.array([x.creep2_tau_s for x in d])
         self.beta = np.array([x.hysteresis_fraction for x in d])
         self.width = np.array([x.hysteresis_width_n for x in d])
+        #: each channel's plays' widths (channels, len(PLAY_SHARES)), N
+        self.play_widths = self.width[:, None] * np.asarray(PLAY_SHARES)[None, :]
         self.dynamic = bool(any(x.active for x in d))
 
     def __len__(self) -> int:
@@ -435,7 +467,7 @@ class CurveSet:
                 x = np.where(self.is_line, (g - self.c) / self.m, x)
             if self.is_lookup.any():
                 lr = np.where(r > 0.0, np.log(np.where(r > 0.0, r, 1.0)), np.nan)
-                x = np.where(self.is_lookup, interpolate_knots(lr, self.log_r, self.knot_f, self.last), x)
+                x = np.where(self.is_lookup, self.knots.force(lr), x)
             # an open sensor (no current) carries no load, whatever the curve reads at 0 S
             return np.asarray(np.where(np.isnan(g), np.nan, np.where(g == 0.0, 0.0, x + self.offset)))
 
@@ -452,7 +484,7 @@ class CurveSet:
             e2 = np.exp(-dt / self.tau2)
             z1 = e1 * state.z1 + (1.0 - e1) * self.a1 * held
             z2 = e2 * state.z2 + (1.0 - e2) * self.a2 * held
-            widths = self.width[:, None] * np.asarray(PLAY_SHARES)[None, :]
+            widths = self.play_widths
             xs = x[:, None]
             play = np.where(~np.isnan(xs), np.clip(state.play_n, xs - widths, xs + widths), state.play_n)
             s = np.mean((play - xs) / widths, axis=1)
