@@ -29,7 +29,7 @@ force and the temperature. ``replay`` groups them into device samples and runs
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from ..modbus.image import RawSample
 from .processor import DeviceProcessor
-from .snapshot import ChannelStatus
+from .snapshot import ChannelStatus, DeviceSnapshot
 
 __all__ = ["ChannelSeries", "ReplayedChannel", "replay"]
 
@@ -79,10 +79,13 @@ def _joined(series: Sequence[ChannelSeries], field: str) -> FloatArray | None:
 
 
 def replay(
-    processor: DeviceProcessor, series: Sequence[ChannelSeries]
+    processor: DeviceProcessor,
+    series: Sequence[ChannelSeries],
+    on_snapshot: Callable[[DeviceSnapshot], None] | None = None,
 ) -> tuple[tuple[ReplayedChannel, ...], int]:
     """Run ``processor`` over ``series`` (one per enabled channel, in the processor's order;
-    see the module docstring): what it read at each sample, and the number of device samples."""
+    see the module docstring): what it read at each sample, and the number of device samples.
+    ``on_snapshot`` is given each device sample's snapshot, in time order."""
     k = len(series)
     if k != len(processor.channels):
         raise ValueError(f"{k} series for a processor of {len(processor.channels)} channels")
@@ -133,6 +136,8 @@ def replay(
             device_time_s=clock_s,
         )
         snap, state = processor.process(state, raw, wall_time_s=t, host_time_s=clock_s)
+        if on_snapshot is not None:
+            on_snapshot(snap)
         mine = which[rows]
         force[rows] = snap.force_n[mine]
         static[rows] = snap.force_static_n[mine]

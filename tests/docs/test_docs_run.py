@@ -24,7 +24,8 @@ a link to tests/ (the data the docs name), so ``-c examples/gateway.toml`` or
 copies. Long-running commands run in the background until they are up, then get SIGINT and
 must exit 0: ``tactile-sim run`` is up when its port accepts a connection and stays up as the
 doc's device until the doc's next ``tactile-sim run`` or its end; ``tactile-gateway run`` and
-``demo`` are up when their /metrics says ``tactile_device_up ... 1``.
+``demo`` are up when their /metrics says ``tactile_device_up ... 1``; ``tactile-gateway view``
+when the page address it prints serves ``/api/playback``.
 
 What a user types is changed only by ``SUBSTITUTIONS`` and ``CONFIG_SUBSTITUTIONS`` below:
 fixed ports become ephemeral loopback ports, /tmp becomes the test's directory, a 1-minute
@@ -201,6 +202,18 @@ def device_up(port: int) -> bool:
     return re.search(r"^tactile_device_up\{[^}]*\} 1(\.0)?$", text, re.MULTILINE) is not None
 
 
+def view_up(log: str) -> bool:
+    """``tactile-gateway view`` is up when the page it printed serves the record's frames."""
+    m = re.search(r"page on (https?://\S+/) ", log)
+    if m is None:
+        return False
+    try:
+        with urllib.request.urlopen(m[1] + "api/playback", timeout=2.0) as resp:
+            return resp.status == 200
+    except OSError:
+        return False
+
+
 @dataclass
 class Session:
     """One doc's working directory, ports and background processes."""
@@ -290,6 +303,13 @@ def run_command(session: Session, block: Block, printed: str) -> None:
             argv += ["--tcp", f"127.0.0.1:{session.ports.device}"]
         proc = session.device = session.start(argv)
         wait_until(where, proc, lambda: session.log(proc), lambda: port_open(session.ports.device))
+        return
+    if Path(argv[0]).name == "tactile-gateway" and sub == "view":
+        proc = session.start(argv)
+        try:
+            wait_until(where, proc, lambda: session.log(proc), lambda: view_up(session.log(proc)))
+        finally:
+            session.stop(proc, where)
         return
     if Path(argv[0]).name == "tactile-gateway" and sub in ("run", "demo"):
         proc = session.start(argv)

@@ -6,6 +6,9 @@
 // The colour scale is in force (N) or pressure (kPa: force over the layout's cell area), its
 // top follows the frame's peak (auto, with hysteresis) or is fixed; settings come from the
 // URL (?scale=auto|fixed&max=2.5&unit=N|kPa&numbers=1) and the controls write them back.
+// Playback (tactile-gateway view RECORD): /api/devices says "playback"; the page then reads
+// every frame of the record from /api/playback and a time slider, play/pause and a speed feed
+// the frame at the slider's time to the same drawing code.
 "use strict";
 
 const ST = { OK: 0, NO_CONTACT: 1, SATURATED: 2, OPEN: 3, SHORT: 4, STALE: 5, ERROR: 6, EXTRAPOLATED: 7 };
@@ -38,6 +41,12 @@ let lastDraw = 0;
 let lastKey = "";
 // the view's settings; read from the URL at start, written back on change
 const view = { mode: "auto", max: null, unit: "N", numbers: false };
+// the colours of the trend chart's lines (and of its key, style.css)
+const LINE_TOTAL = "#f5a623";
+const LINE_REFERENCE = "#6fd27a";
+const LINE_AREA = "#5fb3ff";
+// playback of a record: null when live
+let playback = null;
 
 function $(id) { return document.getElementById(id); }
 
@@ -177,6 +186,7 @@ async function loadDevices() {
   for (const name of [...devices.keys()]) if (!names.has(name)) devices.delete(name);
   buildOverview();
   route();
+  return data;
 }
 
 // ---------------------------------------------------------------- frames
@@ -191,7 +201,7 @@ function onFrame(f) {
   d.frame = f;
   d.arrived = now;
   if (f.t !== null) {
-    d.history.push([f.t, f.total_force_n, f.contact_area_mm2]);
+    d.history.push([f.t, f.total_force_n, f.contact_area_mm2, refTotal(f)]);
     while (d.history.length && d.history[0][0] < f.t - HISTORY_S) d.history.shift();
     if (f.cop_mm) d.trail.push([f.t, f.cop_mm[0], f.cop_mm[1]]);
     while (d.trail.length && d.trail[0][0] < f.t - TRAIL_S) d.trail.shift();
@@ -200,6 +210,11 @@ function onFrame(f) {
   d.polls.push([now, f.polls_total]);
   while (d.polls.length > 2 && d.polls[0][0] < now - 3000) d.polls.shift();
   dirty = true;
+}
+
+// a frame's reference total force (N; playback of a record with force_n), else null
+function refTotal(f) {
+  return f.reference_total_force_n === undefined ? null : f.reference_total_force_n;
 }
 
 function connect() {
@@ -212,6 +227,7 @@ function connect() {
 // "up", "stale" (the gateway could not read it, or no frame lately) or "waiting"
 function deviceState(d, now) {
   if (!d.frame) return "waiting";
+  if (playback) return d.frame.up ? "up" : "stale"; // a record's frames do not age
   const limit = Math.max(1500, 5000 * (d.frame.poll_interval_s || 0.1));
   if (!d.frame.up || now - d.arrived > limit) return "stale";
   return "up";
@@ -436,7 +452,8 @@ function drawHistory(canvas, d) {
   ctx.strokeRect(l, t, r - l, b - t);
   const hist = d.history;
   const tEnd = hist.length ? hist[hist.length - 1][0] : 0;
-  const fMax = Math.max(d.layout.scale_n[1], ...hist.map((p) => p[1] || 0));
+  const hasRef = hist.some((p) => p[3] !== null && p[3] !== undefined);
+  const fMax = Math.max(d.layout.scale_n[1], ...hist.map((p) => Math.max(p[1] || 0, p[3] || 0)));
   const aMax = Math.max(1, ...hist.map((p) => p[2] || 0));
   ctx.font = "12px sans-serif";
   ctx.fillStyle = "#e6e9ee";
@@ -452,9 +469,10 @@ function drawHistory(canvas, d) {
   ctx.textAlign = "center";
   ctx.fillText("-30 s", l, b + 12);
   ctx.fillText("now", r, b + 12);
-  const series = (idx, max, style) => {
+  const series = (idx, max, style, dash) => {
     ctx.strokeStyle = style;
     ctx.lineWidth = 2;
+    ctx.setLineDash(dash || []);
     ctx.beginPath();
     hist.forEach((p, i) => {
       const x = r - ((tEnd - p[0]) / HISTORY_S) * (r - l);
@@ -462,9 +480,14 @@ function drawHistory(canvas, d) {
       if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
     });
     ctx.stroke();
+    ctx.setLineDash([]);
   };
-  series(1, fMax, "#f5a623");
-  series(2, aMax, "#5fb3ff");
+  series(1, fMax, LINE_TOTAL);
+  if (hasRef) series(3, fMax, LINE_REFERENCE, [6, 4]);
+  series(2, aMax, LINE_AREA);
+  // the key under the chart names each line drawn
+  $("key-reference").hidden = !hasRef;
+  canvas.dataset.reference = hasRef ? "1" : "0";
 }
 
 function updateText(d, now) {
@@ -484,11 +507,13 @@ function updateText(d, now) {
   $("health-up").textContent = f.up ? "up" : `not answering${f.error ? ": " + f.error : ""}`;
   $("health-up").title = $("health-up").textContent;
   const p = d.polls;
-  const rate = p.length > 1 && p[p.length - 1][0] > p[0][0]
-    ? ((p[p.length - 1][1] - p[0][1]) * 1000) / (p[p.length - 1][0] - p[0][0]) : null;
+  const rate = playback ? (f.poll_interval_s ? 1 / f.poll_interval_s : null)
+    : p.length > 1 && p[p.length - 1][0] > p[0][0]
+      ? ((p[p.length - 1][1] - p[0][1]) * 1000) / (p[p.length - 1][0] - p[0][0]) : null;
   $("poll-rate").textContent = fmt(rate, 1);
   $("read-errors").textContent = String(f.read_errors_total);
-  const age = f.last_success_t === null ? null : f.t - f.last_success_t + (now - d.arrived) / 1000;
+  const age = f.last_success_t === null ? null
+    : f.t - f.last_success_t + (playback ? 0 : (now - d.arrived) / 1000);
   $("poll-age").textContent = fmt(age, 1);
   $("summary-old").textContent = st === "stale"
     ? `old: stale${age === null ? "" : `, last good poll ${fmt(age, 1)} s ago`}` : "";
@@ -547,6 +572,7 @@ function drawKey(d) {
 
 function render() {
   const now = performance.now();
+  if (playback) tickPlayback(now);
   if (dirty || now - lastDraw > 250) {
     dirty = false;
     lastDraw = now;
@@ -566,6 +592,98 @@ function render() {
     }
   }
   requestAnimationFrame(render);
+}
+
+// ---------------------------------------------------------------- playback
+// the index of the last frame at or before time t (s, the record's clock), or 0
+function frameAt(t) {
+  const fr = playback.frames;
+  let lo = 0;
+  let hi = fr.length - 1;
+  while (lo < hi) {
+    const mid = (lo + hi + 1) >> 1;
+    if (fr[mid].t <= t) lo = mid; else hi = mid - 1;
+  }
+  return lo;
+}
+
+// show the record at time t: the frame then, the trend and trail up to it
+function seek(t) {
+  const pb = playback;
+  pb.t = Math.max(pb.start, Math.min(pb.end, t));
+  $("time").value = String(pb.t);
+  $("time").dataset.t = String(pb.t);
+  $("time-readout").textContent = `${(pb.t - pb.start).toFixed(2)} s of ${(pb.end - pb.start).toFixed(2)} s`;
+  const k = frameAt(pb.t);
+  if (k === pb.shown) return;
+  pb.shown = k;
+  const d = devices.get(pb.device);
+  if (!d) return;
+  const f = pb.frames[k];
+  d.frame = f;
+  d.arrived = performance.now();
+  d.history = [];
+  d.trail = [];
+  for (let i = k; i >= 0 && pb.frames[i].t >= f.t - HISTORY_S; i--) {
+    const g = pb.frames[i];
+    d.history.unshift([g.t, g.total_force_n, g.contact_area_mm2, refTotal(g)]);
+    if (g.t >= f.t - TRAIL_S && g.cop_mm) d.trail.unshift([g.t, g.cop_mm[0], g.cop_mm[1]]);
+  }
+  updateAuto(d, performance.now());
+  $("map").dataset.frame = String(f.seq);
+  dirty = true;
+}
+
+function setPlaying(on) {
+  const pb = playback;
+  if (on && pb.t >= pb.end) seek(pb.start); // play at the end starts again
+  pb.playing = on;
+  pb.tick = null;
+  $("play").disabled = on;
+  $("pause").disabled = !on;
+  $("playback").dataset.playing = on ? "1" : "0";
+}
+
+function tickPlayback(now) {
+  const pb = playback;
+  if (!pb.playing) return;
+  if (pb.tick !== null) {
+    seek(pb.t + ((now - pb.tick) / 1000) * pb.speed);
+    if (pb.t >= pb.end) { setPlaying(false); return; }
+  }
+  pb.tick = now;
+}
+
+async function startPlayback(info) {
+  const resp = await fetch("/api/playback", { cache: "no-store" });
+  if (!resp.ok) throw new Error(`/api/playback: ${resp.status}`);
+  const data = await resp.json();
+  playback = {
+    device: data.device, frames: data.frames, start: data.start_s, end: data.end_s,
+    t: data.start_s, shown: -1, playing: false, tick: null, speed: 1,
+  };
+  $("playback").hidden = false;
+  $("conn").textContent = `playback: ${info.source || "record"}`;
+  $("conn").className = "conn live";
+  const slider = $("time");
+  slider.min = String(data.start_s);
+  slider.max = String(data.end_s);
+  slider.addEventListener("input", () => seek(Number.parseFloat(slider.value)));
+  $("play").addEventListener("click", () => setPlaying(true));
+  $("pause").addEventListener("click", () => setPlaying(false));
+  $("speed").addEventListener("change", () => {
+    playback.speed = Number.parseFloat($("speed").value) || 1;
+    playback.tick = null;
+  });
+  const q = new URLSearchParams(location.search);
+  const speed = q.get("speed");
+  if (speed && [...$("speed").options].some((o) => o.value === speed)) {
+    $("speed").value = speed;
+    playback.speed = Number.parseFloat(speed);
+  }
+  seek(data.start_s);
+  setPlaying(false);
+  document.body.dataset.playback = "ready";
 }
 
 function hover(ev) {
@@ -626,7 +744,9 @@ function main() {
     changed();
   });
   $("numbers").addEventListener("change", () => { view.numbers = $("numbers").checked; changed(); });
-  loadDevices().then(connect, (err) => { $("conn").textContent = `cannot load devices: ${err.message}`; });
+  loadDevices()
+    .then((data) => (data.playback ? startPlayback(data.playback) : connect()))
+    .catch((err) => { $("conn").textContent = `cannot load: ${err.message}`; });
   requestAnimationFrame(render);
 }
 

@@ -1,0 +1,169 @@
+"""Playback: the live page over the frames of a recorded file (``tactile-gateway view``).
+
+The web layer does not read records (that is analysis): the command replays the record
+through the runtime's processor and hands the resulting ``DeviceSnapshot``s here, one per
+device sample in time order. ``playback_frames`` encodes them as the live page's frames
+(``frames.frame_json``, the same shape, so ``app.js`` draws them with the same code), each
+with one more member, ``reference_total_force_n``: the sum of the record's reference forces
+at that sample (N; ``null`` when the record has no ``force_n`` column).
+
+``PlaybackPage(playback).install(app)`` serves:
+
+* ``/`` and ``/static/{file}``: the same page as the live gateway (the same files and
+  Content-Security-Policy);
+* ``/api/devices`` and ``/api/devices/{name}``: the recorded device's layout, as live, with
+  ``playback`` set (the page switches to its playback controls on it);
+* ``/api/playback``: every frame at once, with the record's time span (s).
+
+A record of more than ``MAX_FRAMES`` device samples is thinned to every k-th sample (the
+last one kept), so the page never receives more than that many frames.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from typing import Any
+
+from aiohttp import web
+
+from ..runtime.snapshot import DeviceSnapshot
+from .app import CSP, STATIC_FILES
+from .frames import DeviceDescription, frame_json, layout_json, num
+
+#: The most frames a playback sends to the page (about 12 MB of JSON for 16 channels).
+MAX_FRAMES = 20_000
+
+
+@dataclass(frozen=True)
+class Playback:
+    """A record's frames as the page reads them: the device's layout (``layout_json``), the
+    frames in time order, the record's time span (s) and whether it has a reference force."""
+
+    layout: dict[str, Any]
+    frames: list[dict[str, Any]]
+    start_s: float
+    end_s: float
+    has_reference: bool
+    source: str = ""
+    samples_total: int = 0  # device samples in the record (``len(frames)`` unless thinned)
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+def thin(n_samples: int, max_frames: int = MAX_FRAMES) -> list[int]:
+    """The indices of the samples kept: all up to ``max_frames``, else every k-th and the last."""
+    if n_samples <= max_frames:
+        return list(range(n_samples))
+    step = math.ceil(n_samples / max_frames)
+    keep = list(range(0, n_samples, step))
+    if keep[-1] != n_samples - 1:
+        keep[-1] = n_samples - 1  # keep the count at most max_frames and the end in view
+    return keep
+
+
+def reference_total_n(snap: DeviceSnapshot) -> float | None:
+    """The sum of the finite reference forces of a sample (N), or None if it has none."""
+    values = [float(v) for v in snap.reference_force_n if math.isfinite(float(v))]
+    return math.fsum(values) if values else None
+
+
+def playback_frames(
+    snapshots: Sequence[DeviceSnapshot],
+    *,
+    has_reference: bool,
+    scale_max_n: float = 5.0,
+    config: DeviceDescription | None = None,
+    source: str = "",
+    max_frames: int = MAX_FRAMES,
+) -> Playback:
+    """The frames of ``snapshots`` (one device, time order) for the page. ``ValueError`` for
+    no snapshot at all (an empty record has nothing to show)."""
+    if not snapshots:
+        raise ValueError("no device sample to play back")
+    names = {s.device for s in snapshots}
+    if len(names) != 1:
+        raise ValueError(f"one device per playback, got {sorted(names)}")
+    frames: list[dict[str, Any]] = []
+    for seq, k in enumerate(thin(len(snapshots), max_frames), start=1):
+        snap = snapshots[k]
+        frame = frame_json(snap, seq, None)
+        frame["reference_total_force_n"] = num(reference_total_n(snap)) if has_reference else None
+        frames.append(frame)
+    first, last = snapshots[0].timestamp_s, snapshots[-1].timestamp_s
+    layout = layout_json(snapshots[0], scale_max_n, config)
+    return Playback(layout, frames, float(first), float(last), has_reference, source, len(snapshots))
+
+
+def _json(data: Any) -> web.Response:
+    body = json.dumps(data, separators=(",", ":"), allow_nan=False).encode()
+    return web.Response(body=body, headers={"Content-Type": "application/json"})
+
+
+class PlaybackPage:
+    """The page and a read-only API over one ``Playback``."""
+
+    def __init__(self, playback: Playback) -> None:
+        self.playback = playback
+        p = playback
+        self._summary = {
+            "source": p.source,
+            "start_s": num(p.start_s),
+            "end_s": num(p.end_s),
+            "n_frames": len(p.frames),
+            "samples_total": p.samples_total,
+            "has_reference": p.has_reference,
+            **p.info,
+        }
+        entry = dict(p.layout)
+        entry.update(up=True, seq=len(p.frames), stream_frames_dropped_total=0, playback=True)
+        self._entry = entry
+        body = {**self._summary, "device": p.layout["name"], "frames": p.frames}
+        self._frames_body = json.dumps(body, separators=(",", ":"), allow_nan=False).encode()
+        self._files = {name: resources.files(__package__).joinpath("static", name).read_bytes()
+                       for name in STATIC_FILES}  # fmt: skip
+
+    def install(self, app: web.Application) -> None:
+        r = app.router
+        r.add_get("/", self._index)
+        r.add_get("/static/{file}", self._static)
+        r.add_get("/api/devices", self._devices)
+        r.add_get("/api/devices/{name}", self._device)
+        r.add_get("/api/playback", self._frames)
+        app.on_response_prepare.append(self._policy)
+
+    async def _policy(self, request: web.Request, response: web.StreamResponse) -> None:
+        if request.path != "/metrics":
+            response.headers["Content-Security-Policy"] = CSP
+            response.headers["X-Content-Type-Options"] = "nosniff"
+            response.headers.setdefault("Referrer-Policy", "no-referrer")
+
+    def _file(self, name: str) -> web.Response:
+        return web.Response(body=self._files[name], headers={"Content-Type": STATIC_FILES[name],
+                                                             "Cache-Control": "no-cache"})  # fmt: skip
+
+    async def _index(self, request: web.Request) -> web.Response:
+        return self._file("index.html")
+
+    async def _static(self, request: web.Request) -> web.Response:
+        name = request.match_info["file"]
+        if name not in STATIC_FILES:
+            raise web.HTTPNotFound()
+        return self._file(name)
+
+    async def _devices(self, request: web.Request) -> web.Response:
+        return _json({
+            "devices": [self._entry],
+            "clients": {"stream": 0, "page": 0},
+            "playback": self._summary,
+        })  # fmt: skip
+
+    async def _device(self, request: web.Request) -> web.Response:
+        if request.match_info["name"] != self._entry["name"]:
+            raise web.HTTPNotFound()
+        return _json(self._entry)
+
+    async def _frames(self, request: web.Request) -> web.Response:
+        return web.Response(body=self._frames_body, headers={"Content-Type": "application/json"})
