@@ -8,6 +8,7 @@ from typing import Any
 
 from ..modbus.scan import ScanResult, config_snippet, constant_runs, printable_text
 from ..modbus.scan_read import ScanRun
+from ..modbus.scan_snippet import count_register
 
 #: Frame candidates listed.
 SHOWN_FRAMES = 5
@@ -59,6 +60,9 @@ def report_lines(result: ScanResult, run: ScanRun, device_id: int) -> list[str]:
         lines.append(f"  {_span(table, address, len(values))}: {_values_text(values)}{quoted}")
     if not result.constants:
         lines.append("  none")
+    count = count_register(result)
+    if count is not None:
+        lines.append(f"  {count.table} {count.address} reads {count.value}: the channel count of frame 1?")
     snippet = config_snippet(result, device_id)
     if snippet is not None:
         lines += [

@@ -33,7 +33,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from .scan_clocks import _adc_channels, _clocks
-from .scan_frames import _frame
+from .scan_frames import _frame, frame_runs
 from .scan_frames import adc_bits_for as adc_bits_for
 from .scan_snippet import config_snippet, constant_runs, printable_text
 from .scan_stats import _present, _runs, _stats, _value
@@ -96,9 +96,10 @@ def analyse(snapshots: Sequence[Snapshot]) -> ScanResult:
     for name in tables:
         readable = [a for a, v in series[name].items() if (name, a) not in in_clock and _present(v)]
         for run in _runs(readable):
-            frame = _frame(name, run, series[name], len(ordered))
-            if frame is not None:
-                frames.append(frame)
+            for part in frame_runs(run, series[name]):
+                frame = _frame(name, part, series[name], len(ordered))
+                if frame is not None:
+                    frames.append(frame)
     frames.sort(key=lambda f: (-f.score, tables.index(f.table), f.address))
     claimed = in_clock | {(f.table, a) for f in frames for a in range(f.address, f.end + 1)}
     constants = tuple(

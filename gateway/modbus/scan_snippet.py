@@ -8,6 +8,28 @@ from collections.abc import Iterable
 
 from .scan_types import ConstantRegister, ScanResult
 
+#: Constant registers the snippet suggests as identity checks.
+IDENTITY_CHECKS = 3
+
+
+def count_register(result: ScanResult) -> ConstantRegister | None:
+    """A constant register that reads the best frame's length, the channel count: in the
+    frame's table first, then the nearest to the frame."""
+    frame = result.best_frame
+    if frame is None:
+        return None
+    counts = [c for c in result.constants if c.value == frame.count]
+    counts.sort(key=lambda c: (c.table != frame.table, abs(c.address - frame.address)))
+    return counts[0] if counts else None
+
+
+def identity_registers(result: ScanResult) -> list[ConstantRegister]:
+    """Constant registers to check at connect: the first non-zero ones other than the
+    channel count (identification and version candidates, to be checked by a person)."""
+    count = count_register(result)
+    found = [c for c in result.constants if c.value != 0 and c != count]
+    return found[:IDENTITY_CHECKS]
+
 
 def constant_runs(constants: Iterable[ConstantRegister]) -> list[tuple[str, int, list[int]]]:
     """Constants grouped into runs of consecutive addresses: (table, first address, values)."""
@@ -77,4 +99,31 @@ def config_snippet(result: ScanResult, device_id: int | None = None) -> str | No
             f"registers = {clock.registers}",
             f'unit = "{clock.unit}"' if clock.unit is not None else f"tick_s = {_toml_float(clock.tick_s)}",
         ]
+    lines += _checks(result)
     return "\n".join(lines) + "\n"
+
+
+def _checks(result: ScanResult) -> list[str]:
+    """The ``[bus.device.checks]`` table from the constant registers (none: no lines)."""
+    identity, count = identity_registers(result), count_register(result)
+    if not identity and count is None:
+        return []
+    lines = ["", "[bus.device.checks]"]
+    if identity:
+        lines += [
+            "# constant during the scan: keep those that identify the board (product id, version),",
+            "# drop settings that may change",
+            "registers = [",
+        ]
+        lines += [
+            f'    {{ what = "identifier", table = "{c.table}", address = {c.address}, '
+            f"value = 0x{c.value:04X} }},"
+            for c in identity
+        ]
+        lines.append("]")
+    if count is not None:
+        lines.append(
+            f'channel_count = {{ table = "{count.table}", address = {count.address} }}'
+            f"   # reads {count.value}, the frame's length"
+        )
+    return lines

@@ -17,6 +17,7 @@ import pytest
 from netutil import free_port
 
 from sim_device import ArrayConfig, SimArray, modbus_server, serve_tcp
+from sim_device.dfrobot_map import DFRobotBoard, serve_dfrobot_tcp
 
 CLI = Path(sys.executable).parent / "tactile-gateway"
 READ_FUNCTIONS = {3, 4, 43}
@@ -99,3 +100,23 @@ async def test_scan_of_a_closed_port_is_one_line_and_exit_1() -> None:
     code, out, err = await run_scan(free_port())
     assert code == 1 and out == ""
     assert err.count("\n") == 1 and err.startswith("tactile-gateway: ") and "cannot connect" in err
+
+
+@pytest.mark.parametrize("gap", ["zero", "absent"])
+async def test_scan_finds_the_frame_of_a_dfrobot_board(gap: str) -> None:
+    """A DFRobot-style 6x6 board (``sim_device.dfrobot_map``): VID and PID 0x3343 at input 0-1,
+    a gap at 2-6, 36 12-bit cells at 7-42 (five idle at a constant 9), the count 36 at 43.
+    The frame is 7-42; the ids and the count are constants and the snippet's checks."""
+    async with serve_dfrobot_tcp(DFRobotBoard(gap=gap)) as port:
+        code, out, err = await run_scan(port)
+    assert code == 0, err
+    assert line_with(out, "1. input").startswith("1. input 7-42: 36 registers, 12-bit codes")
+    assert "2. input" not in out
+    first = "input 0-6: 0x3343 0x3343 0x0000" if gap == "zero" else "input 0-1: 0x3343 0x3343"
+    assert line_with(out, first.split(":")[0] + ":").startswith(first)
+    assert line_with(out, "input 43:") == "input 43: 0x0024"
+    assert line_with(out, "input 43 reads") == "input 43 reads 36: the channel count of frame 1?"
+    assert "adc_address = 7" in out and "channels = 36" in out and "adc_bits = 12" in out
+    assert '{ what = "identifier", table = "input", address = 0, value = 0x3343 },' in out
+    assert '{ what = "identifier", table = "input", address = 1, value = 0x3343 },' in out
+    assert 'channel_count = { table = "input", address = 43 }' in out
