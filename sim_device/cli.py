@@ -7,6 +7,7 @@ Examples::
     tactile-sim run --rtu-tcp 127.0.0.1:5021 --scenario my_protocol.toml --record out.csv
     tactile-sim run --tls 0.0.0.0:802 --cert server.crt --key server.key
     tactile-sim run --map rawgrid --channels 36 --tcp 127.0.0.1:5022
+    tactile-sim run --map skin60 --rtu /dev/ttyUSB0 --baud 4000000 --scenario cycles
     tactile-sim scenarios
     tactile-sim fsr-record fsr.csv --runs 3 --protocol calibration --seed 2
 
@@ -23,6 +24,7 @@ import sys
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, TextIO
 
 import click
 
@@ -37,6 +39,7 @@ from .config import (
 )
 from .faults import FaultError
 from .fsr_emulator import PROTOCOLS, FsrEmulator, FsrParams, write_record
+from .maps import VENDOR_MAPS
 from .modbus_server import ServerStartError, SimServer, serve_serial, serve_tcp, serve_tls
 from .record import Recorder, array_metadata
 from .scenarios import Scenario, ScenarioError, builtin_scenarios
@@ -175,10 +178,18 @@ def fsr_record_cmd(
 @click.option(
     "--map",
     "register_map",
-    type=click.Choice(REGISTER_MAPS),
+    type=click.Choice(REGISTER_MAPS + VENDOR_MAPS),
     default=REGISTER_MAPS[0],
     show_default=True,
-    help="Register map: docs/register-map.md or docs/register-map-rawgrid.md.",
+    help="Register map: docs/register-map.md, docs/register-map-rawgrid.md or "
+    "docs/register-map-skin60.md (skin60: 60 points, function 0x42; --channels, --columns, "
+    "--pitch-mm do not apply); dfrobot: a DFRobot-style 6x6 board (TCP only, no physics).",
+)
+@click.option(
+    "--log-requests",
+    "log_requests",
+    type=click.Path(dir_okay=False),
+    help="skin60 only: write every request received to this file (tab-separated).",
 )
 @click.option(
     "--board-leakage-ohm",
@@ -218,6 +229,7 @@ def run_cmd(
     sample_period: float,
     register_map: str,
     board_leakage_ohm: float,
+    log_requests: str | None,
     record_path: str | None,
     record_period: float,
     stop_after: float | None,
@@ -232,8 +244,49 @@ def run_cmd(
         raise click.BadParameter("must be > 0", param_hint="--record-period")
     ids = _device_ids(device_ids)
     cols = columns if columns is not None else min(channels, math.ceil(math.sqrt(channels)))
+    if register_map == "dfrobot":
+        if transport.kind != "tcp":
+            raise click.UsageError("--map dfrobot is served over --tcp")
+        asyncio.run(_serve_dfrobot(transport, ids[0], stop_after))
+        return
+    skin = register_map == "skin60"
+    if skin and transport.kind == "tls":
+        raise click.UsageError("--map skin60 is served over --tcp, --rtu-tcp or --rtu")
+    if log_requests and not skin:
+        raise click.UsageError("--log-requests is only used with --map skin60")
+    log_file: TextIO | None = None
     try:
         effects = parse_world_effects(world_effects)
+        if skin:
+            from .skin60 import Skin60Device, open_request_log, skin60_config
+
+            base = skin60_config(
+                seed=seed,
+                speed=speed,
+                noise_lsb_rms=noise_lsb,
+                sensor_noise_rel=sensor_noise,
+                world_effects=effects,
+                param_spread=not no_spread,
+                sample_period_s=sample_period,
+            )
+            loaded = Scenario.load(scenario, base.layout)
+            config = base.with_changes(scenario=loaded)
+            log_file = open_request_log(log_requests) if log_requests else None
+            skins = [Skin60Device(SimArray(config, device_id), log_file) for device_id in ids]
+            for device in skins:
+                device.power_on()
+            options = (
+                baud,
+                line_timing,
+                turnaround_ms / 1000.0,
+                cert,
+                key,
+                record_path,
+                record_period,
+                stop_after,
+            )
+            asyncio.run(_serve([d.array for d in skins], transport, *options, skins=skins))
+            return
         base = ArrayConfig(
             channels=channels,
             columns=cols,
@@ -258,6 +311,30 @@ def run_cmd(
         asyncio.run(serving)
     except _USER_ERRORS as exc:
         raise click.ClickException(str(exc)) from None
+    finally:
+        if log_file is not None:
+            log_file.close()
+
+
+async def _serve_dfrobot(t: _Transport, device_id: int, stop_after: float | None) -> None:
+    """The DFRobot-style board (``dfrobot_map``) over Modbus TCP until SIGINT or SIGTERM."""
+    from .dfrobot_map import DFRobotBoard, serve_dfrobot_tcp
+
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, stop.set)
+    async with serve_dfrobot_tcp(DFRobotBoard(), t.host, t.port, device_id) as port:
+        click.echo(
+            f"tactile-sim: serving a DFRobot-style 6x6 board (device id {device_id}) on tcp {t.host}:{port}; "
+            "map dfrobot",
+            err=True,
+        )
+        sys.stderr.flush()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), timeout=stop_after)
+    click.echo("tactile-sim: stopped", err=True)
 
 
 @contextlib.asynccontextmanager
@@ -269,8 +346,20 @@ async def _open(
     turnaround_s: float,
     cert: str | None,
     key: str | None,
+    skins: list[Any] | None = None,
 ) -> AsyncIterator[SimServer]:
-    if t.kind == "rtu":
+    if skins is not None:
+        from .skin60 import serve_skin60_serial, serve_skin60_tcp
+
+        if t.kind == "rtu":
+            async with serve_skin60_serial(skins, t.device, baud, line_timing, turnaround_s) as server:
+                yield server
+        else:
+            async with serve_skin60_tcp(
+                skins, t.host, t.port, "rtu" if t.kind == "rtu-tcp" else "socket"
+            ) as server:
+                yield server
+    elif t.kind == "rtu":
         async with serve_serial(arrays, t.device, baud, line_timing, turnaround_s) as server:
             yield server
     elif t.kind == "tls":
@@ -293,6 +382,8 @@ async def _serve(
     record_path: str | None,
     record_period: float,
     stop_after: float | None,
+    *,
+    skins: list[Any] | None = None,
 ) -> None:
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -303,7 +394,7 @@ async def _serve(
             handlers.append(sig)
     recorder: Recorder | None = None
     try:
-        async with _open(arrays, t, baud, line_timing, turnaround_s, cert, key) as server:
+        async with _open(arrays, t, baud, line_timing, turnaround_s, cert, key, skins) as server:
             if record_path:
                 meta = array_metadata(arrays[0], record_period)
                 meta["device_id"] = ",".join(str(a.device_id) for a in arrays)
@@ -314,7 +405,7 @@ async def _serve(
             where = t.device if t.kind == "rtu" else f"{server.host}:{server.port}"
             ids = ",".join(str(a.device_id) for a in arrays)
             scenario = arrays[0].scenario
-            register_map = arrays[0].config.register_map
+            register_map = "skin60" if skins is not None else arrays[0].config.register_map
             map_note = "" if register_map == REGISTER_MAPS[0] else f", map {register_map}"
             click.echo(
                 f"tactile-sim: serving {len(arrays)} array(s) of {arrays[0].n_channels} channels "

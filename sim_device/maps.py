@@ -14,6 +14,15 @@ Maps (``ArrayConfig.register_map``):
   ``sim_device.registers``; high-side divider (eq. 18);
 - ``"rawgrid"`` (``sim_device.rawgrid.RawgridMap``): ``docs/register-map-rawgrid.md``.
 
+Vendor-protocol devices (``VENDOR_MAPS``) are not register maps of a ``SimArray``: they wrap
+an array of the default map and answer on the bus themselves (their own function codes):
+
+- ``"skin60"`` (``sim_device.skin60``, ``tactile-sim run --map skin60``):
+  ``docs/register-map-skin60.md``, a 60-point skin read with function code 0x42;
+- ``"dfrobot"`` (``sim_device.dfrobot_map``, ``tactile-sim run --map dfrobot --tcp ...``): a
+  DFRobot-style 6 x 6 board's public register map, a press crossing it (no physics; for
+  ``scan`` and bring-up).
+
 Pure python/numpy: ``pymodbus_device`` turns the ``Block`` declarations into pymodbus data.
 """
 
@@ -43,6 +52,9 @@ IntArray = NDArray[np.int64]
 VENDOR_NAME = "Tactile Gateway Project"
 PRODUCT_CODE = "TSA-SIM"
 PRODUCT_NAME = "Simulated MIS piezoresistive sensor array"
+
+#: Devices with a vendor protocol over a default-map array (``sim_device.skin60``).
+VENDOR_MAPS: tuple[str, ...] = ("skin60", "dfrobot")
 
 
 def package_version() -> str:

@@ -3,20 +3,24 @@
 A channel that reads ``R_b`` unloaded where the model expects ``R(0 N)`` carries a parallel
 conductance ``1/R_b - 1/R(0)`` (board leakage, a preloaded cell); the gateway takes it off every
 reading (``runtime.processor``), so a channel at its baseline reads 0 N, no contact. ``tare``
-measures ``R_b`` (as ADC counts for ADC devices, the raw reading) and refuses a sample set that
-is not a still, unloaded array, saying which channels and why:
+measures ``R_b`` (as ADC counts for ADC devices, the raw reading; in ohm for float devices and
+from a record) for all channels or the chosen ones, and refuses a set that is not a still,
+unloaded array, naming the real cause first, with numbers:
 
-* too few polls (fewer than ``MIN_POLLS``);
-* a channel that drifts: the mean of the last third of the polls differs from the first
-  third's by more than ``max(DRIFT_FLOOR, 4 standard errors)``, in its own unit (creep after
-  a load was lifted, a hand still on the array);
-* a channel whose noise (standard deviation) exceeds ``max_noise`` (counts, or a relative
-  ``max_noise_rel`` of the resistance for float devices);
-* a channel that looks loaded: the model reads more than ``max_force_n`` at its baseline, or
-  its baseline conductance is more than ``LOADED_FACTOR`` times the median channel's
-  (arrays of at least 4 channels).
-* a channel shorted or invalid at rest (a fault, not a baseline); a channel open at rest is
-  recorded as such (no correction), and the result says so.
+* too few polls (fewer than ``MIN_POLLS``) of a channel;
+* FAULTY: a channel shorted or invalid at rest (a fault, not a baseline); a channel open at
+  rest is recorded as such, and the result says so;
+* LOADED: the model reads more than ``max_force_n`` (N) at a channel's baseline, or its baseline
+  conductance is more than ``LOADED_FACTOR`` times the median chosen channel's (at least 4
+  channels); the message says the array is loaded and names the ways out (``--channels`` for
+  the unloaded ones, ``--from-record`` with an unloaded moment, ``--device-zero``);
+* MOVING: the mean of the last third of a channel's polls differs from the first third's by
+  more than ``max(DRIFT_FLOOR, 4 standard errors)`` (counts, or ``DRIFT_FLOOR_REL`` of the
+  reading in ohm; the standard error from the scatter within the two thirds, so a step reads
+  as a drift, not as noise): creep after a load was lifted, a hand still on the array; the message gives
+  the drift over the window and per second;
+* NOISY: a channel's standard deviation exceeds ``max_noise_counts`` (counts), or
+  ``max_noise_rel`` of the reading (ohm); only this message suggests wiring or shielding.
 """
 
 from __future__ import annotations
@@ -33,7 +37,16 @@ from ..config import DeviceConfig
 from ..errors import GatewayError
 from ..model import DividerStatus, SensorModel
 
-__all__ = ["MIN_POLLS", "TareError", "TareResult", "compute_tare"]
+__all__ = [
+    "MIN_POLLS",
+    "ChannelSeries",
+    "TareError",
+    "TareResult",
+    "compute_tare",
+    "compute_tare_series",
+    "index_ranges",
+    "model_zero_ohm",
+]
 
 MIN_POLLS: Final = 10
 DRIFT_FLOOR_COUNTS: Final = 2.0
@@ -47,7 +60,7 @@ class RawSample(Protocol):
     """One poll's values of every channel (``gateway.modbus.image.RawSample`` is one)."""
 
     @property
-    def counts(self) -> NDArray[np.integer[Any]] | None: ...
+    def counts(self) -> NDArray[np.integer[Any]] | FloatArray | None: ...
 
     @property
     def resistance_ohm(self) -> FloatArray | None: ...
@@ -58,10 +71,22 @@ class TareError(GatewayError):
 
 
 @dataclass(frozen=True)
+class ChannelSeries:
+    """The readings of one channel over the window: ``values`` (ADC counts, or ohm when
+    ``counts`` is False) at ``time_s`` (s, any origin; None: evenly spaced, no rate given)."""
+
+    index: int
+    values: FloatArray
+    time_s: FloatArray | None = None
+
+
+@dataclass(frozen=True)
 class TareResult:
-    """The baselines of a device: ``key`` is ``baseline_counts`` or ``baseline_ohm``,
-    ``values`` one per channel (index order), ``resistance_ohm`` the same as resistances,
-    ``force_before_n`` what the model read at each baseline without the tare."""
+    """The baselines of the tared channels: ``channels`` their indices (ascending), ``key``
+    ``baseline_counts`` or ``baseline_ohm``, ``values`` one per tared channel (counts or ohm),
+    ``resistance_ohm`` the same as resistances (ohm, of the mean), ``force_before_n`` what the
+    model read at each baseline without the tare (N), ``noise`` the standard deviations (counts
+    or ohm), ``n_polls`` the fewest polls of a channel."""
 
     key: str
     values: tuple[float, ...]
@@ -70,6 +95,7 @@ class TareResult:
     noise: tuple[float, ...]
     n_polls: int
     notes: tuple[str, ...]
+    channels: tuple[int, ...] = ()
 
 
 def _names(device: DeviceConfig, idx: Sequence[int] | NDArray[np.intp], detail: Sequence[str]) -> str:
@@ -78,65 +104,142 @@ def _names(device: DeviceConfig, idx: Sequence[int] | NDArray[np.intp], detail: 
     return ", ".join(shown[:6]) + more
 
 
+def index_ranges(indices: Sequence[int]) -> str:
+    """``[0, 1, 2, 5, 7, 8]`` -> ``"0-2,5,7-8"`` (the ``--channels`` spelling)."""
+    parts: list[str] = []
+    ordered = sorted(set(indices))
+    k = 0
+    while k < len(ordered):
+        j = k
+        while j + 1 < len(ordered) and ordered[j + 1] == ordered[j] + 1:
+            j += 1
+        parts.append(str(ordered[k]) if j == k else f"{ordered[k]}-{ordered[j]}")
+        k = j + 1
+    return ",".join(parts)
+
+
+def model_zero_ohm(device: DeviceConfig, index: int) -> float:
+    """The model's own unloaded resistance R(0 N) of channel ``index`` (ohm, may be inf): as a
+    baseline it takes nothing off (its excess conductance ``1/R_b - 1/R(0)`` is 0)."""
+    ch = device.channels[index]
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        return float(SensorModel(ch.effects, [ch.params]).resistance(np.zeros(1))[0])
+
+
 def compute_tare(
     device: DeviceConfig,
     samples: Sequence[RawSample],
     *,
+    channels: Sequence[int] | None = None,
+    times_s: Sequence[float] | None = None,
+    window: str = "the sampling window",
     max_force_n: float = 0.5,
     max_noise_counts: float = 8.0,
     max_noise_rel: float = 0.02,
 ) -> TareResult:
-    """The baselines of ``device`` from ``samples`` of it at rest; ``TareError`` if they are
+    """The baselines of ``device`` (of ``channels``, indices; default all) from ``samples`` of
+    it at rest, polled at ``times_s`` (s; optional, for drift rates); ``TareError`` if they are
     not those of a still, unloaded array (see the module docstring)."""
+    chosen = list(range(device.n_channels)) if channels is None else sorted(set(channels))
     if len(samples) < MIN_POLLS:
         raise TareError(
             f"only {len(samples)} polls; a tare needs at least {MIN_POLLS} (sample longer); "
             "nothing was written"
         )
     adc = device.encoding == "adc"
-    if adc:
-        data = np.array([np.asarray(s.counts, dtype=np.float64) for s in samples if s.counts is not None])
-    else:
-        data = np.array(
-            [np.asarray(s.resistance_ohm, dtype=np.float64) for s in samples if s.resistance_ohm is not None]
-        )
-    if data.shape[0] < MIN_POLLS:
+    keep = [k for k, s in enumerate(samples) if (s.counts if adc else s.resistance_ohm) is not None]
+    if len(keep) < MIN_POLLS:
         raise TareError("the samples carry no values of this device's encoding; nothing was written")
-    n_polls = data.shape[0]
-    third = max(1, n_polls // 3)
-    with np.errstate(invalid="ignore"):
-        mean = data.mean(axis=0)
-        std = data.std(axis=0, ddof=1)
-        drift = data[-third:].mean(axis=0) - data[:third].mean(axis=0)
-    std_err = std * math.sqrt(2.0 / third)
-    if adc:
-        floor = np.full_like(mean, DRIFT_FLOOR_COUNTS)
-        noisy = std > max_noise_counts
-        noise_limit = f"{max_noise_counts:g} counts"
-    else:
-        floor = DRIFT_FLOOR_REL * np.abs(mean)
-        noisy = std > max_noise_rel * np.abs(mean)
-        noise_limit = f"{100 * max_noise_rel:g} % of the reading"
-    finite = np.isfinite(mean)
-    drifting = finite & (np.abs(drift) > np.maximum(floor, 4.0 * std_err))
-    if drifting.any():
-        idx = np.flatnonzero(drifting)
-        unit = "counts" if adc else "ohm"
-        detail = [f"{drift[i]:+.3g} {unit} over the window" for i in idx]
-        raise TareError(
-            f"not still: {_names(device, idx, detail)} drift; wait until the array has settled "
-            "(creep after a load is lifted takes tens of seconds) and tare again; nothing was written"
-        )
-    noisy &= finite
-    if noisy.any():
-        idx = np.flatnonzero(noisy)
-        detail = [f"std {std[i]:.3g}" for i in idx]
-        raise TareError(
-            f"too noisy: {_names(device, idx, detail)} above {noise_limit}; check the wiring or "
-            "shielding, or raise the limit; nothing was written"
-        )
+    data = np.array(
+        [np.asarray(samples[k].counts if adc else samples[k].resistance_ohm, dtype=np.float64) for k in keep]
+    )
+    t = None if times_s is None else np.asarray([times_s[k] for k in keep], dtype=np.float64)
+    series = [ChannelSeries(i, data[:, i], t) for i in chosen]
+    return compute_tare_series(
+        device,
+        series,
+        counts=adc,
+        window=window,
+        max_force_n=max_force_n,
+        max_noise_counts=max_noise_counts,
+        max_noise_rel=max_noise_rel,
+    )
 
-    if adc:
+
+def _loaded_message(
+    device: DeviceConfig,
+    idx: NDArray[np.intp],
+    force: FloatArray,
+    r: FloatArray,
+    ratio: FloatArray,
+    max_force_n: float,
+    chosen: Sequence[int],
+    window: str,
+) -> str:
+    detail = [
+        f"{force[i]:.3g} N by the model at {r[i]:.4g} ohm, {ratio[i]:.2g}x the median conductance"
+        for i in idx
+    ]
+    loaded_channels = {chosen[int(i)] for i in idx}
+    rest = [c for c in chosen if c not in loaded_channels]
+    way = f"--channels {index_ranges(rest)}" if rest else "--channels with the unloaded ones"
+    return (
+        f"the array is loaded over {window}: {_names(device, [chosen[int(i)] for i in idx], detail)}; "
+        f"allowed at rest: at most {max_force_n:g} N (--max-force) and {LOADED_FACTOR:g}x the median "
+        f"channel's conductance. A baseline under a load would hide it: lift it off and tare again, or "
+        f"tare only the unloaded channels ({way}), or take the baseline from a record of an unloaded "
+        "moment (--from-record RECORD.csv --start-s S --end-s E), or zero the device itself "
+        "(--device-zero, if it has a zero action); nothing was written"
+    )
+
+
+def compute_tare_series(
+    device: DeviceConfig,
+    series: Sequence[ChannelSeries],
+    *,
+    counts: bool,
+    window: str = "the sampling window",
+    max_force_n: float = 0.5,
+    max_noise_counts: float = 8.0,
+    max_noise_rel: float = 0.02,
+) -> TareResult:
+    """The baselines of the channels of ``series`` (each its own readings, ADC counts when
+    ``counts`` else ohm) over ``window`` (words for messages); ``TareError`` naming the cause
+    in the order faulty, loaded, moving, noisy (see the module docstring)."""
+    if not series:
+        raise TareError("no channel to tare; nothing was written")
+    chosen = [s.index for s in series]
+    n = np.array([s.values.size for s in series])
+    if int(n.min()) < MIN_POLLS:
+        few = np.flatnonzero(n < MIN_POLLS)
+        detail = [f"{int(n[i])} polls" for i in few]
+        raise TareError(
+            f"too few polls in {window}: {_names(device, [chosen[int(i)] for i in few], detail)}; "
+            f"a tare needs at least {MIN_POLLS} per channel (sample longer); nothing was written"
+        )
+    m = len(series)
+    mean = np.empty(m)
+    std = np.empty(m)
+    drift = np.empty(m)
+    rate = np.full(m, np.nan)
+    std_err = np.empty(m)
+    with np.errstate(invalid="ignore"):
+        for k, s in enumerate(series):
+            v = s.values
+            third = max(1, v.size // 3)
+            mean[k] = v.mean()
+            std[k] = v.std(ddof=1)
+            drift[k] = v[-third:].mean() - v[:third].mean()
+            # the scatter within each third, so that a step (a load landing) is a drift, not noise
+            std_err[k] = math.sqrt((v[:third].var(ddof=1) + v[-third:].var(ddof=1)) / third)
+            if s.time_s is not None:
+                span = float(s.time_s[-third:].mean() - s.time_s[:third].mean())
+                if span > 0:
+                    rate[k] = drift[k] / span
+    finite = np.isfinite(mean)
+
+    # FAULTY: a short or an invalid reading at rest
+    if counts:
         r, status = device.front_end.resistance(mean)
         value = np.rint(mean)
         _, rounded_status = device.front_end.resistance(value)
@@ -151,45 +254,91 @@ def compute_tare(
     if faulty.size:
         detail = [labels[int(status[i])] for i in faulty]
         raise TareError(
-            f"faulty at rest: {_names(device, faulty, detail)}; a short or an invalid reading is a fault, "
-            "not a baseline (disable the channel or fix it); nothing was written"
+            f"faulty at rest: {_names(device, [chosen[int(i)] for i in faulty], detail)}; a short or an "
+            "invalid reading is a fault, not a baseline (disable the channel or fix it); nothing was written"
         )
     notes: list[str] = []
     not_ok = np.flatnonzero(~ok)
     if not_ok.size:
         detail = [labels[int(status[i])] for i in not_ok]
         notes.append(
-            f"{_names(device, not_ok, detail)} read at a rail at rest: the baseline records it, and readings "
-            "there stay flagged"
+            f"{_names(device, [chosen[int(i)] for i in not_ok], detail)} read at a rail at rest: the "
+            "baseline records it, and readings there stay flagged"
         )
 
-    force = np.full(device.n_channels, np.nan)
-    for i, ch in enumerate(device.channels):
-        if ok[i]:
+    # LOADED: a force by the model, or far more conductance than the median channel
+    force = np.full(m, np.nan)
+    for k, i in enumerate(chosen):
+        if ok[k]:
+            ch = device.channels[i]
             model = SensorModel(ch.effects, [ch.params])
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                force[i] = float(model.invert_static(np.array([r[i]])).force_n[0])
+                force[k] = float(model.invert_static(np.array([r[k]])).force_n[0])
     loaded = ok & (force > max_force_n)
     conductance = np.where(ok, 1.0 / np.where(ok, r, 1.0), np.nan)
+    ratio = np.full(m, np.nan)
     if np.count_nonzero(ok) >= 4:
         median = float(np.nanmedian(conductance))
-        loaded |= ok & (conductance > LOADED_FACTOR * median) & (median > 0)
+        if median > 0:
+            ratio = conductance / median
+            loaded |= ok & (ratio > LOADED_FACTOR)
     if loaded.any():
-        idx = np.flatnonzero(loaded)
-        detail = [f"{force[i]:.3g} N by the model, {r[i]:.4g} ohm" for i in idx]
         raise TareError(
-            f"looks loaded: {_names(device, idx, detail)} (more than {max_force_n:g} N, or "
-            f"{LOADED_FACTOR:g}x the median channel's conductance); lift everything off the array and "
-            "tare again; nothing was written"
+            _loaded_message(device, np.flatnonzero(loaded), force, r, ratio, max_force_n, chosen, window)
         )
-    key = "baseline_counts" if adc else "baseline_ohm"
-    stored = [float(v) for v in value]
+
+    # MOVING: a trend across the window
+    floor = np.full(m, DRIFT_FLOOR_COUNTS) if counts else DRIFT_FLOOR_REL * np.abs(mean)
+    drifting = finite & (np.abs(drift) > np.maximum(floor, 4.0 * std_err))
+    if drifting.any():
+        idx = np.flatnonzero(drifting)
+        if counts:
+            detail = [
+                f"{drift[i]:+.3g} counts over {window}"
+                + (f", {rate[i]:+.3g} counts/s" if np.isfinite(rate[i]) else "")
+                for i in idx
+            ]
+            limit = f"{DRIFT_FLOOR_COUNTS:g} counts"
+        else:
+            detail = [
+                f"{100 * drift[i] / mean[i]:+.3g} % over {window}"
+                + (f", {100 * rate[i] / mean[i]:+.3g} %/s" if np.isfinite(rate[i]) else "")
+                for i in idx
+            ]
+            limit = f"{100 * DRIFT_FLOOR_REL:g} % of the reading"
+        raise TareError(
+            f"the array is moving: {_names(device, [chosen[int(i)] for i in idx], detail)} (first third "
+            f"to last third; allowed: {limit} or 4 standard errors, whichever is larger); wait until it "
+            "has settled (creep after a load is lifted takes tens of seconds) and tare again; "
+            "nothing was written"
+        )
+
+    # NOISY: still and unloaded, but the readings scatter
+    if counts:
+        noisy = std > max_noise_counts
+        noise_limit = f"{max_noise_counts:g} counts (--max-noise)"
+        detail_noise = [f"std {std[i]:.3g} counts" for i in range(m)]
+    else:
+        noisy = std > max_noise_rel * np.abs(mean)
+        noise_limit = f"{100 * max_noise_rel:g} % of the reading"
+        detail_noise = [f"std {100 * std[i] / mean[i]:.3g} % of {mean[i]:.4g} ohm" for i in range(m)]
+    noisy &= finite
+    if noisy.any():
+        idx = np.flatnonzero(noisy)
+        raise TareError(
+            f"too noisy over {window}: "
+            f"{_names(device, [chosen[int(i)] for i in idx], [detail_noise[i] for i in idx])}"
+            f"; allowed: at most {noise_limit}; the array is still and unloaded, so check the wiring "
+            "or shielding, or raise the limit; nothing was written"
+        )
+    key = "baseline_counts" if counts else "baseline_ohm"
     return TareResult(
         key=key,
-        values=tuple(stored),
+        values=tuple(float(v) for v in value),
         resistance_ohm=tuple(float(x) for x in r),
         force_before_n=tuple(float(x) for x in force),
         noise=tuple(float(x) for x in std),
-        n_polls=n_polls,
+        n_polls=int(n.min()),
         notes=tuple(notes),
+        channels=tuple(chosen),
     )

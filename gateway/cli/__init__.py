@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from . import _threads  # noqa: F401  (before numpy loads: see the module)
+from .action_cmd import action_cmd
 from .apply_cmd import apply_cmd
 from .calibrate_cmd import calibrate_cmd
 from .config_cmd import channels, check_config
@@ -15,6 +16,7 @@ from .run_cmd import demo, poll_once, run
 from .scan_cmd import scan
 from .subscribe_cmd import subscribe
 from .tare_cmd import tare
+from .view_cmd import view
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -37,5 +39,7 @@ main.add_command(tare)
 main.add_command(scan)
 main.add_command(subscribe)
 main.add_command(apply_cmd)
+main.add_command(action_cmd)
+main.add_command(view)
 
 __all__ = ["main"]

@@ -32,6 +32,7 @@ from ..errors import ConfigError
 from ..metrics.web_config import load_web_config
 from ..modbus.plan import MERGE_GAP, device_plan
 from ..model import parameter_names
+from ..runtime.summary import device_summary
 from .common import config_option
 
 __all__ = ["channels", "check_config"]
@@ -104,7 +105,7 @@ def _grid(dev: DeviceConfig) -> list[str]:
 def _device_lines(dev: DeviceConfig) -> list[str]:
     """What the gateway will assume of a device: where its settings come from, the clock, the
     checks at connect, the read-out circuit, the zero baselines and the layout."""
-    out = []
+    out = [f"    {line}" for line in device_summary(dev)]
     if dev.profile:
         out.append(f"    map, front end and layout from {dev.profile}, with the device table's overrides")
     clock = dev.registers.clock
@@ -131,16 +132,21 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
         else "    calibration: none (the parameters of this file and the defaults)"
     )
     tared = [ch for ch in dev.channels if ch.baseline_ohm is not None]
-    if tared:
+    device_zero = any(name == "zero" for name, _ in dev.registers.actions)
+    if dev.encoding == "output":
+        out.append(
+            "    zero: the device's own"
+            + (" (`tare --device-zero` runs its zero action)" if device_zero else "")
+        )
+    elif tared:
         values = [ch.baseline_ohm for ch in tared if ch.baseline_ohm is not None]
         out.append(
             f"    zero: {len(tared)} channel(s) with an unloaded baseline, "
             f"{min(values):.4g}..{max(values):.4g} ohm (read at the baseline: 0 N, no contact)"
         )
     else:
-        out.append(
-            "    zero: no baselines (an unloaded channel must read the model's own R(0 N); see `tare`)"
-        )
+        hint = "see `tare`" + (", or `tare --device-zero` for the device's own" if device_zero else "")
+        out.append(f"    zero: no baselines (an unloaded channel must read the model's own R(0 N); {hint})")
     out.append(f"    layout: {dev.layout.describe()}; channel indices as drawn:")
     out.extend(_grid(dev))
     return out

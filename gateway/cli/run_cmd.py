@@ -43,6 +43,7 @@ from ..model import Divider
 from ..mqtt.link import MqttLink
 from ..runtime.poller import Poller, SnapshotHolder
 from ..runtime.snapshot import VALUED_STATUSES, DeviceSnapshot, GatewaySnapshot
+from ..runtime.summary import device_summary
 from ..web import FrameHub, WebPage
 from .common import config_option, finite_seconds
 from .simulated import gateway_params
@@ -274,6 +275,10 @@ def poll_once(config_path: Path, as_json: bool, log_level: str) -> None:
         click.echo(json.dumps(snapshot_json(snap), indent=2))
     else:
         click.echo(snapshot_table(snap))
+        for _, device in config.devices():
+            click.echo(f"device {device.name}, what is on:")
+            for line in device_summary(device):
+                click.echo(f"  {line}")
     if not all(d.up for d in snap.devices.values()):
         sys.exit(EXIT_UNREACHABLE)
 

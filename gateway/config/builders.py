@@ -26,7 +26,8 @@ __all__ = ["bus_config_for", "device_config_for", "gateway_config_for"]
 # --------------------------------------------------------------------------- built in code
 def _registers_table(registers: RegisterMap) -> dict[str, Any]:
     """A register map as the ``registers`` table the parser reads (None addresses as -1)."""
-    return {k: (-1 if v is None else v) for k, v in vars(registers).items() if k != "clock"}
+    skip = ("clock", "frame", "setup", "actions")  # tables of their own (a frame is parsed, not built)
+    return {k: (-1 if v is None else v) for k, v in vars(registers).items() if k not in skip}
 
 
 def _clock_value(clock: DeviceClock | None) -> object:

@@ -20,10 +20,10 @@ from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
-from ..modbus.register_map import (
-    ENCODINGS,
-)
+from ..modbus.plan import MODBUS_MAX_READ
+from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, ValueFrame
 from ..model.conversion import CONVERSION_KINDS, Conversion, ConversionError, conversion_from_table
+from ..model.curves import DRIFT_KEYS, CurveError, Drift
 from ..model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
 from ..model.params import PARAMETER_RANGES, ParameterError, SensorParams, parameter_names
 from .profiles import load_profile, merge_profile
@@ -40,7 +40,18 @@ from .tables import (
     suggest,
     type_name,
 )
-from .wire import CHECK_KEYS, REGISTER_KEYS, check_overlaps, parse_checks, parse_clock, parse_registers
+from .wire import (
+    CHECK_KEYS,
+    FRAME_KEYS,
+    REGISTER_KEYS,
+    check_overlaps,
+    parse_actions,
+    parse_checks,
+    parse_clock,
+    parse_frame,
+    parse_registers,
+    parse_setup,
+)
 
 __all__ = ["DEVICE_KEYS", "parse_device"]
 
@@ -55,6 +66,9 @@ DEVICE_KEYS: Final = (
     "allow_write",
     "calibration",
     "registers",
+    "frame",
+    "setup",
+    "actions",
     "clock",
     "checks",
     "front_end",
@@ -248,6 +262,23 @@ def _load_calibration(
     return out, baselines, conversions, ranges
 
 
+def _output_drift(table: Table, frame: ValueFrame | None) -> Drift | None:
+    """``drift = { creep_fraction = ..., ... }`` in ``[bus.device.frame]``: our drift
+    correction on top of a device's own calibrated output (``curves.Drift``)."""
+    if not table.has("drift"):
+        return None
+    if frame is None or frame.quantity not in ("force", "pressure"):
+        raise table.error(
+            "drift", "drift correction on a frame applies to a device's own force or pressure output"
+        )
+    raw = table.raw_table("drift", "drift = { creep_fraction = ..., creep_tau_s = ... }")
+    Table(table.ctx, raw, table.at("drift"), DRIFT_KEYS)
+    try:
+        return Drift(**{k: v for k, v in raw.items()})
+    except CurveError as exc:
+        raise table.ctx.error(join_key(table.at("drift"), exc.key), exc.message) from None
+
+
 def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
     Table(ctx, data, path, DEVICE_KEYS)  # unknown keys of the device's own table
     profile: str | None = None
@@ -258,14 +289,27 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
     table = Table(ctx, data, path, DEVICE_KEYS)
     name = table.name("name")
     device_id = table.integer("device_id", REQUIRED, *DEVICE_ID)
-    encoding = table.choice("encoding", "adc", ENCODINGS)
     n = table.integer("channels", REQUIRED, 1, MAX_CHANNELS)
+    frame_table = table.table("frame", FRAME_KEYS, "[bus.device.frame]")
+    frame = parse_frame(frame_table, n, MODBUS_MAX_READ)
+    if frame is None:
+        encoding = table.choice("encoding", "adc", ENCODINGS[:2])
+    else:
+        encoding = FRAME_ENCODINGS[frame.quantity]
+        if table.has("encoding") and data["encoding"] != encoding:
+            raise table.error(
+                "encoding",
+                f"[bus.device.frame] says the values are {frame.quantity} (encoding {encoding!r}); "
+                "drop this key",
+            )
+    output_drift = _output_drift(frame_table, frame)
     layout = parse_layout(table, table.table("layout", LAYOUT_KEYS, "[bus.device.layout]"), n)
     allow_write = table.boolean("allow_write", False)
     calibration = table.path_value("calibration")
     registers = parse_registers(
-        table.table("registers", REGISTER_KEYS, "[bus.device.registers]"), n, encoding, profile
+        table.table("registers", REGISTER_KEYS, "[bus.device.registers]"), n, encoding, profile, frame
     )
+    registers = replace(registers, setup=parse_setup(table), actions=parse_actions(table))
     clock = parse_clock(ctx, table.at("clock"), data.get("clock"))
     if clock is not None:
         registers = replace(registers, clock=clock)
@@ -278,7 +322,7 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         front_end = parse_front_end(
             ctx, table.at("front_end"), table.raw_table("front_end", "[bus.device.front_end]")
         )
-    elif table.has("divider") or encoding == "float32":
+    elif table.has("divider") or encoding != "adc":
         front_end = parse_divider(table.table("divider", DIVIDER_KEYS, "[bus.device.divider]"))
     else:
         raise table.error(
@@ -354,6 +398,9 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         merged = dict(device_params)
         merged.update(calibrated.get(channel_name, {}))
         blame = model.at("params")
+        source = ["defaults"] + (["config"] if device_params else [])
+        if channel_name in calibrated or channel_name in conversions:
+            source.append("calibration")
         if channel_name in calibrated:
             blame = f"{table.at('calibration')} [channel.{channel_name}]"
         if i in entries:
@@ -366,6 +413,7 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
             merged.update(overrides)
             if overrides:
                 blame = entry.at("params")
+                source.append("channel")
         try:
             params = SensorParams(**merged)
         except ParameterError as exc:
@@ -386,6 +434,7 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
                 baseline,
                 conversion,
                 calibrated_ranges.get(channel_name),
+                tuple(source),
             )
         )
 
@@ -402,6 +451,7 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         calibration=calibration,
         checks=checks,
         profile=profile,
+        output_drift=output_drift,
     )
     check_overlaps(ctx, path, device)
     return device

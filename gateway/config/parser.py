@@ -170,7 +170,7 @@ def parse_bus(
             raise table.error(
                 "serial_port", "expected a serial device such as /dev/ttyUSB0, got an empty string"
             )
-        baudrate = table.integer("baudrate", baudrate, 1, 921600)
+        baudrate = table.integer("baudrate", baudrate, 1, 4000000)
         if baudrate not in STANDARD_BAUDRATES:
             rates = ", ".join(str(r) for r in STANDARD_BAUDRATES)
             raise table.error("baudrate", f"{baudrate} is not a standard rate; allowed: {rates}")

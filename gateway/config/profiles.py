@@ -18,7 +18,7 @@ from typing import Any, Final
 from ..errors import ConfigError
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS
 from .tables import Context, Table, parse_toml, read_text_file, suggest
-from .wire import CHECK_KEYS, REGISTER_KEYS
+from .wire import CHECK_KEYS, FRAME_KEYS, REGISTER_KEYS
 
 __all__ = ["MERGED_TABLES", "PROFILE_KEYS", "builtin_profiles", "load_profile", "merge_profile"]
 
@@ -36,9 +36,13 @@ PROFILE_KEYS: Final = (
     "layout",
     "checks",
     "model",
+    "frame",
+    "setup",
+    "actions",
 )
-#: Tables merged key by key with the device's own.
-MERGED_TABLES: Final = ("registers", "clock", "front_end", "layout", "checks", "model")
+#: Tables merged key by key with the device's own (``setup`` is an array: the device's own
+#: replaces the profile's; ``actions`` merge by name).
+MERGED_TABLES: Final = ("registers", "clock", "front_end", "layout", "checks", "model", "frame", "actions")
 _SUFFIX: Final = ".toml"
 #: The profile's tables whose keys do not depend on a kind: an unknown key in one of them (e.g.
 #: ``clock = ...`` written after ``[registers]``, so TOML puts it in that table) is named with
@@ -49,6 +53,7 @@ _FIXED_KEY_TABLES: Final = (
     ("checks", CHECK_KEYS, "[checks]"),
     ("divider", DIVIDER_KEYS, "[divider]"),
     ("model", ("effects", "params"), "[model]"),
+    ("frame", FRAME_KEYS, "[frame]"),
 )
 
 

@@ -16,10 +16,10 @@ from typing import Final
 
 from ..errors import ConfigError
 from ..modbus.plan import MODBUS_MAX_READ
-from ..modbus.register_map import ENCODINGS, DeviceChecks, RegisterMap
+from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, DeviceChecks, RegisterMap
 from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
 from ..model.conversion import Conversion, LineConversion, LookupConversion
-from ..model.curves import CurveChannel
+from ..model.curves import CurveChannel, Drift
 from ..model.params import Interval
 from .layout import GridLayout
 from .mqtt import MqttConfig
@@ -63,6 +63,11 @@ STANDARD_BAUDRATES: Final = (
     230400,
     460800,
     921600,
+    1000000,
+    1500000,
+    2000000,
+    3000000,
+    4000000,
 )
 PARITIES: Final = ("N", "E", "O")
 MAX_CHANNELS: Final = 256
@@ -159,6 +164,9 @@ class ChannelConfig:
     #: ``calibrated_min_n``/``calibrated_max_n``), or None: a force the channel reads outside
     #: it is flagged ``extrapolated``
     calibrated_range_n: tuple[float, float] | None = None
+    #: where the parameters came from, most specific last: ``defaults``, ``config``
+    #: (the device's model.params), ``calibration`` (the file), ``channel`` (its own entry)
+    params_source: tuple[str, ...] = ("defaults",)
 
     def __post_init__(self) -> None:
         where = f"channel {self.name!r}"
@@ -199,7 +207,7 @@ class ChannelConfig:
 class DeviceConfig:
     """One sensor array on a bus; ``channels`` holds all ``n_channels`` channels in index order.
 
-    ``registers`` is what is read (nothing else is), ``checks`` what is verified at connect,
+    ``registers`` is what is read and written (nothing else is), ``checks`` what is verified at connect,
     ``front_end`` the read-out circuit that turns ADC counts into ohm, ``layout`` where the
     channels sit, ``profile`` the profile the settings came from (for messages).
     """
@@ -216,11 +224,24 @@ class DeviceConfig:
     calibration: Path | None
     checks: DeviceChecks = NO_CHECKS
     profile: str | None = None
+    #: drift correction on top of the device's own force or pressure output (None: passed through)
+    output_drift: Drift | None = None
 
     def __post_init__(self) -> None:
         where = f"device {self.name!r}"
         check_integer(where, "device_id", self.device_id, *DEVICE_ID)
         check_choice(where, "encoding", self.encoding, ENCODINGS)
+        frame = self.registers.frame
+        if frame is not None and FRAME_ENCODINGS[frame.quantity] != self.encoding:
+            raise ConfigError(f"{where}: encoding: {self.encoding!r} but the frame carries {frame.quantity}")
+        if self.encoding == "output" and frame is None:
+            raise ConfigError(
+                f"{where}: encoding: 'output' (the device's own force or pressure) needs a frame"
+            )
+        if self.output_drift is not None and self.encoding != "output":
+            raise ConfigError(
+                f"{where}: output_drift applies to a device's own force or pressure output only"
+            )
         check_integer(where, "channels", self.n_channels, 1, MAX_CHANNELS)
         if not isinstance(self.front_end, FrontEnd):
             raise ConfigError(f"{where}: front_end: expected a FrontEnd, got {type(self.front_end).__name__}")

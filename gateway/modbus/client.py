@@ -8,8 +8,19 @@ pymodbus' outcomes tell:
 * an exception response -> ``DeviceExceptionResponse`` (with the Modbus exception code);
 * no answer in ``timeout_s`` -> ``DeviceTimeoutError``; bytes came back but no valid frame
   (bad CRC, garbage) -> ``DecodeError`` (pymodbus bounds each wait itself, so it can tell);
-* the wrong function in the answer -> ``DecodeError``;
+* the wrong function in the answer -> ``DecodeError``; so is a frame pymodbus' framer cannot
+  decode (an MBAP length that does not match what follows), which pymodbus would otherwise let
+  escape from its protocol callback (asyncio logs a traceback and drops the connection);
 * a connection that cannot be made or is lost -> ``DeviceConnectionError``.
+
+Vendor-defined reads (``vendor_fc.VendorRead``): each read format becomes a pymodbus PDU
+class (``vendor_pdu_class``, built once and cached) whose ``encode`` writes the request
+fields, whose ``decode`` keeps the answer bytes (``VendorRead.registers`` checks them) and
+whose ``calculateRtuFrameSize`` tells pymodbus' RTU framer where the answer ends (address,
+function code, the byte-count field and that many bytes, CRC: ``VendorRead.response_size``).
+It is registered with the decoder of each client (one per connection) before its first use;
+over TCP the MBAP length field frames the answer, so the same class serves every bus kind.
+An exception answer (function code | 0x80) is pymodbus' own ``ExceptionResponse``.
 
 An RTU serial port that has just been opened is emptied first: what waits there is a late
 answer to a request of an earlier connection (RTU frames carry no transaction id).
@@ -31,6 +42,7 @@ from typing import Any, ClassVar
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, AsyncModbusTlsClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.framer import FramerType
+from pymodbus.pdu import ModbusPDU
 
 from ..errors import (
     DecodeError,
@@ -42,12 +54,14 @@ from ..errors import (
 )
 from .endpoint import Endpoint, TlsSettings
 from .transport import EXCEPTION_NAMES, Transport
+from .vendor_fc import VendorRead
 
 log = logging.getLogger(__name__)
 
 #: Modbus function codes used here.
 FC_READ_HOLDING = 0x03
 FC_READ_INPUT = 0x04
+FC_WRITE_SINGLE = 0x06
 FC_WRITE_MULTIPLE = 0x10
 FC_DEVICE_ID = 0x2B
 
@@ -61,6 +75,47 @@ DEVICE_ID_OBJECTS: dict[int, str] = {
     0x05: "ModelName",
     0x06: "UserApplicationName",
 }
+
+
+class VendorPDU(ModbusPDU):
+    """Base of the PDU classes of vendor-defined reads (one subclass per ``VendorRead``).
+
+    The same class is the request (``encode``: the start and count fields of ``address``
+    and ``count`` words) and the answer (``decode``: the bytes after the function code,
+    kept in ``payload``); pymodbus' decoder registers one class for both.
+    """
+
+    vendor: ClassVar[VendorRead]
+
+    def __init__(self, address: int = 0, count: int = 0, dev_id: int = 0, transaction_id: int = 0) -> None:
+        super().__init__(dev_id=dev_id, transaction_id=transaction_id, address=address, count=count)
+        self.payload = b""
+
+    def encode(self) -> bytes:
+        return self.vendor.request_data(self.address, self.count)
+
+    def decode(self, data: bytes) -> None:
+        self.payload = bytes(data)
+
+    @classmethod
+    def calculateRtuFrameSize(cls, data: bytes) -> int:
+        """RTU frame length of an answer from its first bytes (``data`` starts at the device
+        address): address, function code, byte count + data, CRC; 0 while unknown."""
+        size = cls.vendor.response_size(bytes(data[2:]))
+        return 0 if size is None else 2 + size + 2
+
+
+_VENDOR_PDUS: dict[VendorRead, type[VendorPDU]] = {}
+
+
+def vendor_pdu_class(read: VendorRead) -> type[VendorPDU]:
+    """The pymodbus PDU class of ``read`` (built once per read format, then cached)."""
+    cls = _VENDOR_PDUS.get(read)
+    if cls is None:
+        name = f"VendorRead0x{read.function_code:02X}"
+        cls = type(name, (VendorPDU,), {"function_code": read.function_code, "vendor": read})
+        _VENDOR_PDUS[read] = cls
+    return cls
 
 
 def build_ssl_context(tls: TlsSettings) -> ssl.SSLContext:
@@ -94,6 +149,8 @@ class ModbusTransport(Transport):
         self._rx_seen = False
         self._connect_error: BaseException | None = None
         self._ssl_context: ssl.SSLContext | None = None
+        #: function code -> read format registered with the current client's decoder
+        self._vendor_registered: dict[int, VendorRead] = {}
         if bus.kind == "tls":
             if bus.tls is None:
                 raise GatewayError(f"bus {bus.name!r}: kind 'tls' needs a [tls] table")
@@ -192,7 +249,35 @@ class ModbusTransport(Transport):
                 raise
 
         client.ctx.call_create = create
+        self._guard_frames(client)
         return client
+
+    @staticmethod
+    def _guard_frames(client: Any) -> None:
+        """Make an undecodable answer fail its request instead of the connection.
+
+        pymodbus (3.16) raises ``ModbusIOException`` out of its ``data_received`` callback when
+        a frame cannot be decoded, e.g. a Modbus/TCP answer whose MBAP length is shorter than
+        its contents: asyncio logs that with a traceback and closes the connection, and the
+        request fails as a lost connection, on every poll. Here the received bytes are dropped
+        and the outstanding request fails with the decode error instead. Left as is when the
+        client is not the one expected."""
+        ctx: Any = getattr(client, "ctx", None)
+        inner = getattr(ctx, "callback_data", None)
+        if not callable(inner):
+            return
+
+        def callback_data(data: bytes, addr: tuple[Any, ...] | None = None) -> int:
+            try:
+                used: int = inner(data, addr=addr)
+            except ModbusIOException:
+                future = getattr(ctx, "response_future", None)
+                if isinstance(future, asyncio.Future) and not future.done():
+                    future.set_exception(ModbusIOException("undecodable answer"))
+                return len(data)
+            return used
+
+        ctx.callback_data = callback_data
 
     async def _connect(self) -> None:
         self._connect_error = None
@@ -201,6 +286,7 @@ class ModbusTransport(Transport):
         except (OSError, ValueError) as exc:
             raise DeviceConnectionError(f"bus {self.name!r}: cannot open {self.target}: {exc}") from exc
         self._client = client
+        self._vendor_registered = {}
         try:
             ok = await client.connect()
             if ok and self.bus.kind == "rtu":
@@ -348,6 +434,31 @@ class ModbusTransport(Transport):
         response = await self._execute(what, client.write_registers(address, values, device_id=device_id))
         if getattr(response, "function_code", None) != FC_WRITE_MULTIPLE:
             raise DecodeError(f"{what}: answer has function {getattr(response, 'function_code', None)}")
+
+    async def _write_single(self, device_id: int, address: int, value: int, what: str) -> None:
+        client = self._live_client()
+        response = await self._execute(what, client.write_register(address, value, device_id=device_id))
+        if getattr(response, "function_code", None) != FC_WRITE_SINGLE:
+            raise DecodeError(f"{what}: answer has function {getattr(response, 'function_code', None)}")
+
+    async def _read_vendor(
+        self, read: VendorRead, device_id: int, address: int, count: int, what: str
+    ) -> list[int]:
+        """The words of a vendor-defined read; a wrong function or byte count is a ``DecodeError``."""
+        client = self._live_client()
+        pdu_class = vendor_pdu_class(read)
+        if self._vendor_registered.get(read.function_code) != read:
+            client.register(pdu_class)
+            self._vendor_registered[read.function_code] = read
+        request = pdu_class(address, count, dev_id=device_id)
+        response = await self._execute(what, client.execute(False, request))
+        function_code = getattr(response, "function_code", None)
+        if function_code != read.function_code or not isinstance(response, VendorPDU):
+            raise DecodeError(f"{what}: answer has function {function_code}")
+        try:
+            return read.registers(response.payload, count)
+        except DecodeError as exc:
+            raise DecodeError(f"{what}: invalid answer from {self.target}: {exc}") from exc
 
     async def _read_device_identification(self, device_id: int, what: str) -> dict[str, str]:
         client = self._live_client()

@@ -1,30 +1,34 @@
 """The register image of one poll and its decoding into a ``RawSample``.
 
-A ``RegisterImage`` holds the blocks of registers a poll's reads returned; ``decode_sample``
-takes from it what the register map (``register_map``) says a device reports: ADC counts or
-float32 resistances (ohm), the open/short/saturated bitmaps, the reference force (N), the
-temperature (degrees C) and the device clock (s). A block that was not read is a
-``DecodeError`` when required and absent (None) when optional.
+A ``RegisterImage`` holds the blocks of registers a poll's reads returned, by register space
+(``input``, ``holding``, a vendor function's ``fc0x42``, a row's ``input@row3``);
+``decode_sample`` takes from it what the register map (``register_map``) says a device
+reports: ADC counts or float32 resistances (ohm), or a ``ValueFrame``'s values (counts,
+resistance in ohm, or the device's own force in N or pressure in kPa), the
+open/short/saturated bitmaps, the reference force (N), the temperature (degrees C) and the
+device clock (s). A block that was not read is a ``DecodeError`` when required and absent
+(None) when optional.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DecodeError
-from .decode import decode_bitmap, decode_float32, decode_uint16, register_value
-from .register_map import STATUS_BITMAP_STRIDE, DeviceLayout
+from .decode import decode_bitmap, decode_float32, decode_uint16, decode_values, register_value
+from .register_map import STATUS_BITMAP_STRIDE, DeviceLayout, ValueFrame, frame_space
 
 __all__ = ["ImageBlock", "RawSample", "RegisterImage", "RegisterKind", "decode_sample"]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-RegisterKind = Literal["input", "holding"]
+#: a register space: ``input``, ``holding`` or a frame block's (``register_map.frame_space``)
+RegisterKind = str
 
 
 @dataclass(frozen=True)
@@ -79,7 +83,8 @@ class RegisterImage:
 class RawSample:
     """One poll's measurements of all N device channels, decoded but not yet converted."""
 
-    counts: NDArray[np.integer[Any]] | None = None  # ADC counts (encoding "adc"), uint16 from registers
+    #: ADC counts (encoding "adc"): uint16 straight from registers, float64 from a frame
+    counts: NDArray[np.integer[Any]] | FloatArray | None = None
     resistance_ohm: FloatArray | None = None  # ohm (encoding "float32")
     open_bits: BoolArray | None = None
     short_bits: BoolArray | None = None
@@ -89,6 +94,38 @@ class RawSample:
     device_time_s: float | None = None
     #: the clock's raw counter value (ticks), for the wrap-around of narrow counters
     device_ticks: int | None = None
+    #: the device's own calibrated output per channel: force (N) ...
+    output_force_n: FloatArray | None = None
+    #: ... or pressure (kPa), which the processor turns into force over the cell's area
+    output_pressure_kpa: FloatArray | None = None
+
+
+def decode_frame(frame: ValueFrame, image: RegisterImage) -> NDArray[np.uint16] | FloatArray:
+    """A frame's values in its quantity's base unit (counts, ohm, N or kPa), channel by
+    channel over its blocks. Plain 16-bit counts (uint16, big bytes, no scaling) stay uint16
+    registers, so the divider's lookup tables read them; anything else is float64."""
+    plain = (frame.value_type, frame.scale, frame.offset, frame.factor) == ("uint16", 1.0, 0.0, 1.0) and (
+        frame.order in ("ABCD", "CDAB", "AB")
+    )
+    parts: list[Any] = []
+    for k, b in enumerate(frame.blocks):
+        words = image.require(
+            frame_space(frame.table, frame.vendor, b.row),
+            b.address,
+            b.values * frame.width,
+            f"frame block {k}",
+        )
+        parts.append(
+            words if plain else decode_values(words, frame.value_type, frame.order, frame.scale, frame.offset)
+        )
+    values = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    if plain:
+        return np.asarray(values, dtype=np.uint16)
+    return (
+        np.asarray(values, dtype=np.float64) * frame.factor
+        if frame.factor != 1.0
+        else np.asarray(values, dtype=np.float64)
+    )
 
 
 def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
@@ -97,8 +134,20 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
     n = device.n_channels
     wo, bo = regs.word_order, regs.byte_order
     table: RegisterKind = "holding" if regs.table == "holding" else "input"
-    counts = resistance = None
-    if device.encoding == "adc":
+    counts: Any = None
+    resistance = output_force = output_pressure = None
+    if regs.frame is not None:
+        values = decode_frame(regs.frame, image)
+        quantity = regs.frame.quantity
+        if quantity == "counts":
+            counts = values
+        elif quantity == "resistance":
+            resistance = np.asarray(values, dtype=np.float64)
+        elif quantity == "force":
+            output_force = np.asarray(values, dtype=np.float64)
+        else:
+            output_pressure = np.asarray(values, dtype=np.float64)
+    elif device.encoding == "adc":
         counts = decode_uint16(image.require(table, regs.adc_address, n, "ADC counts"), bo)
     elif device.encoding == "float32":
         raw = image.require(table, regs.float_address, 2 * n, "float32 resistances")
@@ -130,5 +179,15 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
             ticks = register_value(words.tolist(), wo, bo)
             device_time = ticks * clock.tick_s
     return RawSample(
-        counts, resistance, bitmaps[0], bitmaps[1], bitmaps[2], temperature, reference, device_time, ticks
+        counts,
+        resistance,
+        bitmaps[0],
+        bitmaps[1],
+        bitmaps[2],
+        temperature,
+        reference,
+        device_time,
+        ticks,
+        output_force,
+        output_pressure,
     )

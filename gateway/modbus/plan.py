@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from .register_map import DeviceClock, DeviceLayout, RegisterBlock, register_blocks
+from .vendor_fc import VendorRead
 
 __all__ = [
     "MAX_GAP_REGISTERS",
@@ -35,14 +36,24 @@ MODBUS_MAX_READ: Final = 125
 class ReadRequest:
     """One Modbus read of a poll: ``count`` registers from ``address``.
 
-    ``kind`` is ``"input"`` (function 4) or ``"holding"`` (function 3); ``purpose`` names the
-    register blocks it covers, in address order, e.g. ``("status", "adc")``.
+    ``kind`` is ``"input"`` (function 4) or ``"holding"`` (function 3), or the space of a
+    frame block (``register_map.frame_space``): a ``vendor`` read (``address`` is its start
+    field, ``count`` the 16-bit words it answers) or a read behind a row select, ``select``
+    being the (holding register, value) written first. ``purpose`` names the register blocks
+    it covers, in address order, e.g. ``("status", "adc")``.
     """
 
     kind: str
     address: int
     count: int
     purpose: tuple[str, ...]
+    vendor: VendorRead | None = None
+    select: tuple[int, int] | None = None
+
+    @property
+    def table(self) -> str:
+        """The register table a standard read uses (``input`` or ``holding``)."""
+        return self.kind.partition("@")[0]
 
     @property
     def end(self) -> int:
@@ -65,7 +76,7 @@ def read_plan(
     if max_gap < 0:
         raise ValueError(f"max_gap = {max_gap} must be >= 0")
     blocks = register_blocks(device, clock=False)
-    widest = max(b.value_registers for b in blocks)
+    widest = max((b.value_registers for b in blocks if b.kind in ("holding", "input")), default=1)
     if widest > max_read_registers:
         raise ValueError(
             f"max_read_registers = {max_read_registers} cannot hold a float32 value (2 registers, "
@@ -98,7 +109,25 @@ def read_plan(
             start, end, purposes = unit_start, unit_end, [purpose]
         if start >= 0:
             requests.append(ReadRequest(kind, start, end - start + 1, tuple(purposes)))
+    requests.extend(_frame_requests(device, blocks))
     return tuple(requests)
+
+
+def _frame_requests(device: DeviceLayout, blocks: Sequence[RegisterBlock]) -> list[ReadRequest]:
+    """A request of its own for each frame block read through a vendor function or behind a
+    row select (neither merges with anything): in frame order, each row's select first."""
+    frame = device.registers.frame
+    if frame is None:
+        return []
+    out: list[ReadRequest] = []
+    for block, fb in zip((b for b in blocks if b.purpose == "frame"), frame.blocks, strict=True):
+        if block.kind in ("holding", "input"):
+            continue
+        select = None
+        if fb.row is not None and frame.row_select_address is not None:
+            select = (frame.row_select_address, fb.row)
+        out.append(ReadRequest(block.kind, block.address, block.count, ("frame",), frame.vendor, select))
+    return out
 
 
 def block_registers(

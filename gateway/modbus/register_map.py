@@ -10,6 +10,14 @@ and temperature (degrees C) as float32, and the device clock when the map names 
 (``DeviceClock``: an unsigned counter of 1, 2 or 4 registers and its tick in seconds).
 Nothing is read that the map does not name. ``DeviceChecks`` are the optional registers and
 identification verified when a device is connected, before it is polled.
+
+A device whose frame does not follow that map describes it with a ``ValueFrame``: what each
+value is (ADC counts, resistance, or a force or pressure the device has calibrated itself),
+its unit, its encoding (Telegraf's types and byte orders, scale and offset), and the blocks
+that carry it: input or holding registers, a vendor-defined function code
+(``vendor_fc.VendorRead``), or one row at a time behind a row-select register. ``DeviceWrite``
+is a register write the configuration names: a set-up write made at connect, or one step
+of a named action (a device zero). Nothing else is ever written.
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ from dataclasses import dataclass
 from typing import Final, Protocol
 
 from ..errors import ConfigError
+from .vendor_fc import VendorRead
 
 __all__ = [
     "BYTE_ORDERS",
@@ -26,6 +35,8 @@ __all__ = [
     "DEVICE_TIME_ADDRESS",
     "DEVICE_TIME_REGISTERS",
     "ENCODINGS",
+    "FRAME_ENCODINGS",
+    "FRAME_QUANTITIES",
     "IDENTIFICATION_FIELDS",
     "MAX_ADDRESS",
     "REGISTER_TABLES",
@@ -34,15 +45,22 @@ __all__ = [
     "DeviceChecks",
     "DeviceClock",
     "DeviceLayout",
+    "DeviceWrite",
+    "FrameBlock",
     "RegisterBlock",
     "RegisterCheck",
     "RegisterMap",
+    "ValueFrame",
+    "frame_space",
     "register_blocks",
     "status_registers",
 ]
 
-#: How a device reports each channel: ``adc`` counts of a divider, or ``float32`` ohm.
-ENCODINGS: Final = ("adc", "float32")
+#: How a device reports each channel: ``adc`` counts of a divider, ``float32`` ohm, or its
+#: own calibrated ``output`` (force or pressure; only through a ``ValueFrame``).
+ENCODINGS: Final = ("adc", "float32", "output")
+#: The encoding a frame's quantity stands for.
+FRAME_ENCODINGS: Final = {"counts": "adc", "resistance": "float32", "force": "output", "pressure": "output"}
 BYTE_ORDERS: Final = ("big", "little")
 #: The three status bitmaps (open, short, saturated) start 16 registers apart.
 STATUS_BITMAP_STRIDE: Final = 16
@@ -145,6 +163,151 @@ class DeviceChecks:
         return bool(self.registers or self.identification)
 
 
+#: What a frame's values can be, with each unit's factor to the gateway's base unit (counts,
+#: ohm, N, kPa).
+FRAME_QUANTITIES: Final[dict[str, dict[str, float]]] = {
+    "counts": {"counts": 1.0},
+    "resistance": {"ohm": 1.0, "kohm": 1e3, "Mohm": 1e6},
+    "force": {"N": 1.0, "mN": 1e-3, "kN": 1e3, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605},
+    "pressure": {"kPa": 1.0, "Pa": 1e-3, "MPa": 1e3, "mbar": 0.1, "bar": 100.0, "psi": 6.894757293168},
+}
+#: Registers per value of each type (``decode.VALUE_TYPES``' widths).
+FRAME_TYPE_WIDTHS: Final = {"uint16": 1, "int16": 1, "uint32": 2, "int32": 2, "float32": 2, "float64": 4}
+#: Where a frame's blocks are read: function 4, function 3, or a vendor-defined function code.
+FRAME_TABLES: Final = ("input", "holding", "vendor")
+
+
+@dataclass(frozen=True)
+class FrameBlock:
+    """One block of a frame: ``values`` consecutive values from ``address`` (a register
+    address, or a vendor read's start field), the next channels in order. ``row`` is the value
+    written to the frame's row-select register before this block is read (None: no select)."""
+
+    address: int
+    values: int
+    row: int | None = None
+
+
+@dataclass(frozen=True)
+class ValueFrame:
+    """How a device lays out its channel values (module docstring): ``quantity`` in ``unit``
+    (``FRAME_QUANTITIES``), each value ``value_type`` in byte order ``order``, read as
+    raw x ``scale`` + ``offset``, from ``blocks`` in ``table``; ``vendor`` is the read when
+    ``table`` is ``"vendor"``; ``row_select_address`` the holding register a row's number is
+    written to before that row's block is read."""
+
+    quantity: str
+    unit: str
+    value_type: str
+    order: str
+    scale: float
+    offset: float
+    table: str
+    blocks: tuple[FrameBlock, ...]
+    vendor: VendorRead | None = None
+    row_select_address: int | None = None
+
+    def __post_init__(self) -> None:
+        units = FRAME_QUANTITIES.get(self.quantity)
+        if units is None:
+            raise ConfigError(
+                f"frame: quantity: {self.quantity!r} is not allowed; allowed: {', '.join(FRAME_QUANTITIES)}"
+            )
+        if self.unit not in units:
+            raise ConfigError(
+                f"frame: unit: {self.unit!r} is not allowed for {self.quantity}; allowed: {', '.join(units)}"
+            )
+        if self.value_type not in FRAME_TYPE_WIDTHS:
+            raise ConfigError(
+                f"frame: type: {self.value_type!r} is not allowed; allowed: {', '.join(FRAME_TYPE_WIDTHS)}"
+            )
+        if self.table not in FRAME_TABLES:
+            raise ConfigError(
+                f"frame: table: {self.table!r} is not allowed; allowed: {', '.join(FRAME_TABLES)}"
+            )
+        if (self.table == "vendor") != (self.vendor is not None):
+            raise ConfigError(
+                "frame: a vendor read needs table = 'vendor' and its function_code, and only it"
+            )
+        if not self.blocks:
+            raise ConfigError("frame: blocks: at least one block is required")
+        rows = [b.row is not None for b in self.blocks]
+        if self.row_select_address is not None and not all(rows):
+            raise ConfigError("frame: blocks: with row_select_address every block names its row")
+        if self.row_select_address is None and any(rows):
+            raise ConfigError("frame: blocks: a block names a row but the frame has no row_select_address")
+        for b in self.blocks:
+            _check_address("frame block", "address", b.address, 1 if self.vendor else b.values * self.width)
+
+    @property
+    def width(self) -> int:
+        """Registers per value."""
+        return FRAME_TYPE_WIDTHS[self.value_type]
+
+    @property
+    def n_values(self) -> int:
+        return sum(b.values for b in self.blocks)
+
+    @property
+    def factor(self) -> float:
+        """The unit's factor to the base unit (counts, ohm, N or kPa)."""
+        return FRAME_QUANTITIES[self.quantity][self.unit]
+
+    def describe(self) -> str:
+        """One line: ``force in mN, uint16 ABCD, vendor function 0x42: 0+60``."""
+        where = (
+            f"vendor function {self.vendor.function_code:#04x}" if self.vendor else f"{self.table} registers"
+        )
+        spans = ", ".join(
+            f"{b.address}+{b.values * (1 if self.vendor else self.width)}"
+            + ("" if b.row is None else f" (row {b.row})")
+            for b in self.blocks
+        )
+        scaled = "" if (self.scale, self.offset) == (1.0, 0.0) else f" x {self.scale:g} + {self.offset:g}"
+        what = "ADC counts" if self.quantity == "counts" else f"{self.quantity} in {self.unit}"
+        return f"{what}, {self.value_type} {self.order}{scaled}, {where}: {spans}"
+
+
+def frame_space(table: str, vendor: VendorRead | None = None, row: int | None = None) -> str:
+    """The name of the register space a block is read from, for the poll's register image:
+    ``input``, ``holding``, ``fc0x42`` (a vendor read), ``input@row3`` (behind a row select)."""
+    space = f"fc{vendor.function_code:#04x}" if vendor is not None else table
+    return space if row is None else f"{space}@row{row}"
+
+
+#: Function codes a set-up or action write may use: write single register, write multiple.
+WRITE_FUNCTIONS: Final = (6, 16)
+
+
+@dataclass(frozen=True)
+class DeviceWrite:
+    """A write the configuration names: ``values`` to holding registers from ``address``
+    with function 6 or 16, described by ``what``; read back after writing when ``verify``
+    (a write-only register cannot be)."""
+
+    what: str
+    address: int
+    values: tuple[int, ...]
+    function: int = 6
+    verify: bool = True
+
+    def __post_init__(self) -> None:
+        where = f"write {self.what!r}"
+        if self.function not in WRITE_FUNCTIONS:
+            raise ConfigError(f"{where}: function: {self.function!r} is not allowed; allowed: 6, 16")
+        if not self.values or (self.function == 6 and len(self.values) != 1):
+            raise ConfigError(f"{where}: function 6 writes one value, function 16 one to 123")
+        _check_address(where, "address", self.address, len(self.values))
+        for v in self.values:
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= 0xFFFF:
+                raise ConfigError(f"{where}: value: {v!r} is out of range; allowed: 0..65535")
+
+    def describe(self) -> str:
+        shown = ", ".join(str(v) for v in self.values)
+        check = "read back" if self.verify else "not read back"
+        return f"{self.what}: holding {self.address} <- {shown} (function {self.function}, {check})"
+
+
 @dataclass(frozen=True)
 class RegisterMap:
     """Where a device keeps each block, in its ``table`` (input or holding registers).
@@ -166,6 +329,12 @@ class RegisterMap:
     temperature_address: int | None = None
     clock: DeviceClock | None = DeviceClock(DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS, 1e-3)
     table: str = "input"
+    #: the channel values' own layout (None: ``adc_address`` or ``float_address`` of ``table``)
+    frame: ValueFrame | None = None
+    #: writes made at every connect, in order, before the first poll
+    setup: tuple[DeviceWrite, ...] = ()
+    #: named actions (``zero``, ``unzero``, ...): each a sequence of writes run on request
+    actions: tuple[tuple[str, tuple[DeviceWrite, ...]], ...] = ()
 
     def __post_init__(self) -> None:
         _check_table("register map", self.table)
@@ -246,7 +415,13 @@ def register_blocks(device: DeviceLayout, clock: bool = True) -> tuple[RegisterB
         for i, bitmap in enumerate(STATUS_BITMAPS):
             address = regs.status_address + i * STATUS_BITMAP_STRIDE
             blocks.append(RegisterBlock(f"status_{bitmap}", "status", table, address, width, 1))
-    if device.encoding == "adc":
+    if regs.frame is not None:
+        f = regs.frame
+        for k, b in enumerate(f.blocks):
+            space = frame_space(f.table, f.vendor, b.row)
+            count = b.values * f.width
+            blocks.append(RegisterBlock(f"frame{k}", "frame", space, b.address, count, f.width))
+    elif device.encoding == "adc":
         blocks.append(RegisterBlock("adc", "adc", table, regs.adc_address, n, 1))
     else:
         blocks.append(RegisterBlock("float", "float", table, regs.float_address, 2 * n, 2))

@@ -9,6 +9,8 @@ back, and turning every failure into the gateway's typed errors (``gateway.error
   ``DeviceConnectionError``;
 * an exception response -> ``DeviceExceptionResponse`` with the Modbus exception code;
 * an answer of the wrong size or with values outside 0..65535 -> ``DecodeError``;
+* a vendor-defined read (``read_vendor``, a ``vendor_fc.VendorRead``) that the device does
+  not know -> ``DeviceExceptionResponse`` with code 1 (illegal function);
 * a write the device configuration does not allow -> ``WriteNotAllowedError``, before
   anything is sent.
 
@@ -16,11 +18,17 @@ On serial framing (RTU: no transaction id, so a late answer to an earlier reques
 like the answer), a device identification whose answer cannot be used is asked once more
 after a short quiet time (``read_device_identification``).
 
+Requests: functions 3 and 4 (``read_holding_registers``, ``read_input_registers``), 6
+(``write_register``), 16 (``write_registers``), 43/14 (``read_device_identification``) and
+vendor-defined reads (``read_vendor``).
+
 A backend implements the primitives ``_connect``, ``_close``, ``_read``, ``_write`` and
-``_read_device_identification`` and the properties ``target`` and ``connected``; it may raise
-the typed errors itself where it knows better (a garbled frame, an exception code). The
-pymodbus backend is ``client.ModbusTransport``; ``virtual.VirtualTransport`` is an in-process
-bus for fast tests of everything above it.
+``_read_device_identification``, and ``_write_single`` and ``_read_vendor`` if it can send
+functions 6 and vendor reads (the defaults refuse with a ``GatewayError``), and the
+properties ``target`` and ``connected``; it may raise the typed errors itself where it
+knows better (a garbled frame, an exception code). The pymodbus backend is
+``client.ModbusTransport``; ``virtual.VirtualTransport`` is an in-process bus for fast
+tests of everything above it.
 """
 
 from __future__ import annotations
@@ -39,6 +47,7 @@ from ..errors import (
     GatewayError,
     WriteNotAllowedError,
 )
+from .vendor_fc import VendorRead
 
 log = logging.getLogger(__name__)
 
@@ -120,6 +129,21 @@ class Transport(abc.ABC):
     async def _write(self, device_id: int, address: int, values: list[int], what: str) -> None:
         """Function 16: write ``values`` from ``address``."""
 
+    async def _write_single(self, device_id: int, address: int, value: int, what: str) -> None:
+        """Function 6: write ``value`` to the holding register ``address`` (a backend that
+        cannot send it keeps this default, which refuses before anything is sent)."""
+        raise GatewayError(f"{what}: bus {self.name!r} ({type(self).__name__}) cannot send function 6")
+
+    async def _read_vendor(
+        self, read: VendorRead, device_id: int, address: int, count: int, what: str
+    ) -> Sequence[int]:
+        """The vendor-defined read ``read``: the 16-bit words of the answer (a backend that
+        cannot send it keeps this default, which refuses before anything is sent)."""
+        raise GatewayError(
+            f"{what}: bus {self.name!r} ({type(self).__name__}) "
+            f"cannot send function 0x{read.function_code:02X}"
+        )
+
     @abc.abstractmethod
     async def _read_device_identification(self, device_id: int, what: str) -> dict[str, str]:
         """Function 43/14: identification objects by name (VendorName, ProductCode, ...)."""
@@ -182,6 +206,44 @@ class Transport(abc.ABC):
         if not self.values_are_16_bit and (min(registers) < 0 or max(registers) > 0xFFFF):
             raise DecodeError(f"{what}: a register value outside 0..65535")
         return registers if type(registers) is list else list(registers)
+
+    async def read_vendor(self, device_id: int, read: VendorRead, address: int, count: int) -> list[int]:
+        """The vendor-defined read ``read`` of ``count`` 16-bit words from ``address`` (values
+        0..65535). ``count`` is 1..``read.max_count`` (125 words: a Modbus PDU holds at most 253
+        bytes; 127 with a one-byte count field in bytes). An answer of another number of words
+        is a ``DecodeError``; an exception answer a ``DeviceExceptionResponse`` (code 1,
+        illegal function, from a device that does not know the function code)."""
+        if not 1 <= count <= read.max_count:
+            raise GatewayError(
+                f"word count {count} outside 1..{read.max_count} for function 0x{read.function_code:02X}"
+            )
+        read.request_data(address, count)  # the fields must hold address and count
+        self._check_device_id(device_id)
+        fc = read.function_code
+        what = f"read function 0x{fc:02X} {address}+{count} of device {device_id} on {self.name!r}"
+        words = await self._call(what, self._read_vendor(read, device_id, address, count, what))
+        assert isinstance(words, Sequence)
+        if len(words) != count:
+            raise DecodeError(f"{what}: asked for {count} words, got {len(words)}")
+        if not self.values_are_16_bit and any(not 0 <= int(w) <= 0xFFFF for w in words):
+            raise DecodeError(f"{what}: a word outside 0..65535")
+        return [int(w) for w in words]
+
+    async def write_register(self, device_id: int, address: int, value: int, allow_write: bool) -> None:
+        """Function 6: write ``value`` (0..65535) to the holding register ``address``. Refused
+        with ``WriteNotAllowedError`` before anything is sent unless the device's configuration
+        allows writes."""
+        if not allow_write:
+            raise WriteNotAllowedError(
+                f"write to register {address} of device {device_id} on bus {self.name!r} refused: "
+                "the device configuration does not set allow_write = true"
+            )
+        check_range(address, 1, 1)
+        if not 0 <= int(value) <= 0xFFFF:
+            raise GatewayError(f"register value {value} outside 0..65535")
+        self._check_device_id(device_id)
+        what = f"write register {address} of device {device_id} on {self.name!r}"
+        await self._call(what, self._write_single(device_id, address, int(value), what))
 
     async def write_registers(
         self, device_id: int, address: int, values: Sequence[int], allow_write: bool

@@ -14,19 +14,33 @@ the poll loop runs without sockets and without waiting:
 
 A read of an address that is not in the image answers exception 2 (illegal data address),
 as a real device does; a device id that is not there gives no answer (a timeout).
-``requests`` logs every request in order.
+
+Vendor-defined reads (``read_vendor``): ``VirtualDevice.vendor`` maps a function code to a
+handler ``(address, count words) -> words`` (``set_vendor_image`` installs one that serves a
+list of words, exception 2 outside it); a handler may raise ``DeviceExceptionResponse``. A
+device without a handler for the code answers exception 1 (illegal function), as a real
+one does. Function 6 (``write_register``) and 16 (``write_registers``) write the holding
+image.
+
+``requests`` logs every request in order as ``(kind, device_id, address, count)``: kind
+"input", "holding", "write" (function 16), "write_single" (function 6), "identification"
+or "vendor 0x42" (a vendor read, count in words). ``writes`` logs every write request with
+its values, ``(device_id, address, values)``: empty means nothing was asked to be written.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 from ..errors import DecodeError, DeviceConnectionError, DeviceExceptionResponse
 from .transport import EXCEPTION_NAMES, Transport
+from .vendor_fc import VendorRead
 
 Fault = str | tuple[str, int]
+#: A vendor read's handler: (address, count in 16-bit words) -> the words of the answer.
+VendorHandler = Callable[[int, int], list[int]]
 FAULTS = ("ok", "timeout", "garbled", "short", "disconnect", "exception")
 
 
@@ -37,6 +51,8 @@ class VirtualDevice:
     input: dict[int, int] = field(default_factory=dict)
     holding: dict[int, int] = field(default_factory=dict)
     identification: dict[str, str] = field(default_factory=dict)
+    #: function code -> handler of vendor-defined reads with that code
+    vendor: dict[int, VendorHandler] = field(default_factory=dict)
 
     def set_input(self, address: int, values: Iterable[int]) -> None:
         for k, v in enumerate(values):
@@ -45,6 +61,21 @@ class VirtualDevice:
     def set_holding(self, address: int, values: Iterable[int]) -> None:
         for k, v in enumerate(values):
             self.holding[address + k] = int(v)
+
+    def set_vendor_image(self, function_code: int, words: Sequence[int]) -> None:
+        """Serve vendor reads with ``function_code`` from ``words`` (address = index into it);
+        a read outside it answers exception 2. Later changes to ``words`` are served."""
+
+        def serve(address: int, count: int) -> list[int]:
+            if address < 0 or address + count > len(words):
+                raise DeviceExceptionResponse(
+                    f"vendor read 0x{function_code:02X} {address}+{count}: "
+                    "exception 2 (illegal data address)",
+                    2,
+                )
+            return [int(w) for w in words[address : address + count]]
+
+        self.vendor[function_code] = serve
 
 
 class VirtualTransport(Transport):
@@ -56,6 +87,7 @@ class VirtualTransport(Transport):
         super().__init__(name, timeout_s)
         self.devices: dict[int, VirtualDevice] = devices if devices is not None else {}
         self.requests: list[tuple[str, int, int, int]] = []
+        self.writes: list[tuple[int, int, tuple[int, ...]]] = []
         self.connects = 0
         self.refuse_connects = 0
         self._faults: deque[Fault] = deque()
@@ -119,8 +151,34 @@ class VirtualTransport(Transport):
         return values[:-1] if short else values
 
     async def _write(self, device_id: int, address: int, values: list[int], what: str) -> None:
+        self.writes.append((device_id, address, tuple(values)))
         self._answer("write", device_id, address, len(values), what)
         self.devices[device_id].set_holding(address, values)
+
+    async def _write_single(self, device_id: int, address: int, value: int, what: str) -> None:
+        self.writes.append((device_id, address, (value,)))
+        self._answer("write_single", device_id, address, 1, what)
+        self.devices[device_id].holding[address] = value
+
+    async def _read_vendor(
+        self, read: VendorRead, device_id: int, address: int, count: int, what: str
+    ) -> Sequence[int]:
+        short = bool(self._faults) and self._faults[0] == "short"
+        if short:
+            self._faults.popleft()
+        self._answer(f"vendor 0x{read.function_code:02X}", device_id, address, count, what)
+        handler = self.devices[device_id].vendor.get(read.function_code)
+        if handler is None:
+            raise DeviceExceptionResponse(f"{what}: device answered exception 1 (illegal function)", 1)
+        try:
+            values = list(handler(address, count))
+        except DeviceExceptionResponse as exc:
+            code = exc.exception_code
+            name = EXCEPTION_NAMES.get(code, "unknown exception")
+            raise DeviceExceptionResponse(
+                f"{what}: device answered exception {code} ({name})", code
+            ) from None
+        return values[:-1] if short else values
 
     async def _read_device_identification(self, device_id: int, what: str) -> dict[str, str]:
         self._answer("identification", device_id, 0, 0, what)

@@ -57,6 +57,7 @@ from .inversion import ForceStatus
 __all__ = [
     "CURVE_KINDS",
     "DRIFT_FORMS",
+    "DRIFT_KEYS",
     "CurveChannel",
     "CurveError",
     "CurveSet",
@@ -476,7 +477,13 @@ class CurveSet:
     ) -> tuple[FloatArray, StatusArray, FloatArray, BoolArray, CurveState]:
         """One sample per channel: force (N), ``ForceStatus``, static force x (N), the
         extrapolated flag (outside the calibrated range) and the new state."""
-        x = self.static_force(resistance_ohm)
+        return self.track_apparent(self.static_force(resistance_ohm), state, dt_s)
+
+    def track_apparent(
+        self, x: FloatArray, state: CurveState, dt_s: float
+    ) -> tuple[FloatArray, StatusArray, FloatArray, BoolArray, CurveState]:
+        """``track`` from the apparent force x (N) itself: a device that calibrates its own
+        static curve reports x, and only the dynamics are corrected here."""
         held = np.maximum(state.last_force_n, 0.0)
         if self.dynamic:
             dt = max(float(dt_s), 0.0) if math.isfinite(dt_s) else 0.0
@@ -558,7 +565,7 @@ _CURVE_KEYS: dict[str, tuple[str, ...]] = {
     "line": ("slope_s_per_n", "intercept_s"),
     "lookup": ("resistance_ohm", "force_n"),
 }
-_DRIFT_KEYS = tuple(f.name for f in fields(Drift))
+DRIFT_KEYS = tuple(f.name for f in fields(Drift))
 _COMMON_KEYS = ("kind", "gain", "offset_n", "force_min_n", "force_max_n", "held_out_force_rms_n")
 
 
@@ -569,7 +576,7 @@ def curve_from_table(data: Mapping[str, object]) -> CurveChannel:
     if kind not in CURVE_KINDS:
         raise CurveError("kind", f"{kind!r} is not a curve kind; allowed: {', '.join(CURVE_KINDS)}")
     assert isinstance(kind, str)
-    allowed = _COMMON_KEYS + _CURVE_KEYS[kind] + _DRIFT_KEYS
+    allowed = _COMMON_KEYS + _CURVE_KEYS[kind] + DRIFT_KEYS
     for key in data:
         if key not in allowed:
             raise CurveError(key, f"unknown key for a {kind} curve; allowed: {', '.join(allowed)}")
@@ -591,7 +598,7 @@ def curve_from_table(data: Mapping[str, object]) -> CurveChannel:
                 raise CurveError(key, f"expected an array of numbers, got {values!r}")
             knots.append(tuple(values))
         curve = LookupCurve(knots[0], knots[1])
-    drift = Drift(**{k: data[k] for k in _DRIFT_KEYS if k in data})  # type: ignore[arg-type]
+    drift = Drift(**{k: data[k] for k in DRIFT_KEYS if k in data})  # type: ignore[arg-type]
     return CurveChannel(
         curve,
         drift,

@@ -54,8 +54,9 @@ from ..modbus.plan import MERGE_GAP, ReadRequest, device_plan
 from ..modbus.transport import Transport
 from .conversion import Conversion
 from .counters import DeviceCounters, Tally
-from .identity import verify_device
+from .identity import needs_preparing, prepare_device
 from .processor import ClockHealth, DeviceProcessor, DeviceState
+from .requests import read_request
 from .snapshot import DeviceSnapshot
 
 log = logging.getLogger(__name__)
@@ -148,9 +149,7 @@ class BusWorker:
         for attempt in range(attempts):
             runner.tally.read()
             try:
-                if req.kind == "input":
-                    return await self.transport.read_input_registers(dev.device_id, req.address, req.count)
-                return await self.transport.read_holding_registers(dev.device_id, req.address, req.count)
+                return await read_request(self.transport, dev.device_id, req)
             except DeviceError as exc:
                 runner.tally.error(error_reason(exc))
                 last = exc
@@ -185,7 +184,6 @@ class BusWorker:
         try:
             reads: list[tuple[RegisterKind, int, list[int]]] = []
             for req in runner.plan:
-                kind: RegisterKind = "input" if req.kind == "input" else "holding"
                 try:
                     if self._has_pending():
                         regs = await self._read_overlapping(runner, req)
@@ -195,7 +193,7 @@ class BusWorker:
                     if exc.exception_code != 2 or not self._fall_back(runner, req):
                         raise
                     return await self.poll_device(runner)
-                reads.append((kind, req.address, regs))
+                reads.append((req.kind, req.address, regs))
         except DeviceError as exc:  # already counted per request
             self.settle_now(runner)
             self._fail(runner, exc)
@@ -301,12 +299,12 @@ class BusWorker:
     async def _verify(self, runner: DeviceRunner) -> bool:
         """Run the device's checks once per connection (``identity.verify_device``); True if
         it may be polled. Raises ``DeviceConnectionError`` when the connection is gone."""
-        if not runner.config.checks:
+        if not needs_preparing(runner.config):
             runner.verified = True
             return True
         runner.tally.read()
         try:
-            await verify_device(self.transport, runner.config)
+            await prepare_device(self.transport, runner.config)
         except DeviceError as exc:
             runner.tally.error(error_reason(exc))
             self.settle_now(runner)

@@ -4,7 +4,8 @@ A configuration (or its profile) may name checks (``DeviceChecks``): registers w
 value (a product id, the channel count) and FC 43/14 identification objects. They are read
 once per connection, before the device is polled; a device that answers differently is not
 polled and its snapshot says why (``DeviceMismatchError``), so forces are never computed
-with a register map, front end or channel count that belongs to another device.
+with a register map, front end or channel count that belongs to another device. Then the
+configuration's set-up writes are made (``prepare_device``), each read back where allowed.
 """
 
 from __future__ import annotations
@@ -14,8 +15,9 @@ from typing import Final
 from ..config import DeviceConfig
 from ..errors import DeviceMismatchError
 from ..modbus.transport import Transport
+from .requests import run_writes
 
-__all__ = ["IDENTIFICATION_OBJECTS", "verify_device"]
+__all__ = ["IDENTIFICATION_OBJECTS", "needs_preparing", "prepare_device", "verify_device"]
 
 #: Configuration keys of the FC 43/14 objects and the names the transport reports them by.
 IDENTIFICATION_OBJECTS: Final = {
@@ -56,3 +58,14 @@ async def verify_device(transport: Transport, device: DeviceConfig) -> None:
                     f"not the configured device: its identification {key} is {shown}, the "
                     f"configuration{_source(device)} expects {expected!r}; not polled until it matches"
                 )
+
+
+def needs_preparing(device: DeviceConfig) -> bool:
+    """Whether anything is read or written at connect (checks or set-up writes)."""
+    return bool(device.checks) or bool(device.registers.setup)
+
+
+async def prepare_device(transport: Transport, device: DeviceConfig) -> None:
+    """``verify_device``, then the set-up writes of the configuration, in order."""
+    await verify_device(transport, device)
+    await run_writes(transport, device.device_id, device.registers.setup)

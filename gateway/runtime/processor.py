@@ -46,7 +46,7 @@ from ..errors import DecodeError
 from ..modbus.image import RawSample
 from ..model import ModelState, SensorModel
 from ..model.conversion import ConversionSet
-from ..model.curves import CurveChannel, CurveSet, CurveState
+from ..model.curves import CurveChannel, CurveSet, CurveState, Drift, LineCurve
 from .baseline import BaselineCorrection
 from .clock import NO_CLOCK_HISTORY, ClockHealth, time_step
 from .snapshot import (
@@ -176,9 +176,17 @@ class DeviceProcessor:
                 frozen_copy(np.array([0.0 if r is None else r[0] for r in ranged], dtype=np.float64)),
                 frozen_copy(np.array([np.inf if r is None else r[1] for r in ranged], dtype=np.float64)),
             )
+        # a device that reports its own calibrated force or pressure: every channel is read
+        # from it, with our drift correction on top when the configuration gives one
+        self.output: CurveSet | None = None
+        if device.encoding == "output":
+            identity = CurveChannel(LineCurve(1.0, 0.0), device.output_drift or Drift())
+            self.output = CurveSet([identity] * len(chans))
+            self.conversions = self.curves = None
+            self._curve_keys = tuple(channel_key(device, c) for c in chans)
         by_effects: dict[tuple[str, ...], list[int]] = {}
         for k, c in enumerate(chans):
-            if c.conversion is None:
+            if c.conversion is None and self.output is None:
                 by_effects.setdefault(tuple(c.effects), []).append(k)
         self.groups: tuple[tuple[NDArray[np.intp], SensorModel], ...] = tuple(
             (np.array(ks, dtype=np.intp), SensorModel(effects, [chans[k].params for k in ks]))
@@ -331,6 +339,8 @@ class DeviceProcessor:
         self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
     ) -> TrackedSample:
         """First step of ``process``: resistances and drift-corrected forces."""
+        if self.output is not None:
+            return self._track_output(state, raw, wall_time_s, host_time_s)
         n = len(self.channels)
         r_out, r_model, base = self._resistance(raw)
         r_model = self._tare(r_model)
@@ -401,6 +411,41 @@ class DeviceProcessor:
             wall_time_s, static,
         )  # fmt: skip
 
+    def _output_force(self, raw: RawSample) -> FloatArray:
+        """The device's own output as force (N): a pressure (kPa) acts on the cell's area."""
+        if raw.output_force_n is not None:
+            return np.asarray(raw.output_force_n[self._pick], dtype=np.float64)
+        if raw.output_pressure_kpa is not None:
+            area_mm2 = self.device.layout.cell_area_mm2
+            return np.asarray(raw.output_pressure_kpa[self._pick], dtype=np.float64) * (area_mm2 * 1e-3)
+        raise DecodeError("a device with a calibrated output needs its force or pressure values")
+
+    def _track_output(
+        self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
+    ) -> TrackedSample:
+        """``track`` for a device that reports force or pressure itself: a value that is not a
+        finite number is an error (flagged, never published as a force); the rest is the
+        device's static reading x, tracked for drift when the configuration asks for it."""
+        assert self.output is not None
+        n = len(self.channels)
+        x = self._output_force(raw)
+        bad = ~np.isfinite(x)
+        base = np.where(bad, np.int8(_CHANNEL_ERROR), np.int8(_CHANNEL_OK)).astype(np.int8)
+        x = np.where(bad, np.nan, x)
+        dt, now, use_device, clock_health = self._dt(state, raw, host_time_s)
+        with np.errstate(invalid="ignore"):
+            force, status, apparent, _, curve_state = self.output.track_apparent(
+                x, state.curve_state or self.output.initial_state(), dt
+            )
+        temperature = None if raw.temperature_c is None else raw.temperature_c[self._pick]
+        nan = np.full(n, np.nan)
+        static = np.where(np.isnan(force), np.nan, np.maximum(apparent, 0.0))
+        return TrackedSample(
+            raw, nan, nan, base, force, status, temperature,
+            DeviceState(state.model_state, now, host_time_s, use_device, None, clock_health, curve_state),
+            wall_time_s, static,
+        )  # fmt: skip
+
     def finish(self, tracked: TrackedSample) -> tuple[DeviceSnapshot, DeviceState]:
         """Second step of ``process``: statuses, array quantities and the snapshot."""
         raw, base, temperature = tracked.raw, tracked.base_status, tracked.temperature_c
@@ -425,7 +470,11 @@ class DeviceProcessor:
             read_only(force),
         )
         static: StaticEstimate
-        if self.conversions is None and self.curves is None:
+        if self.output is not None:
+            every = np.arange(len(self.channels), dtype=np.intp)
+            by_channel = tracked.converted_static_n if tracked.converted_static_n is not None else force
+            static = _StaticWithConversions(*inputs, every, read_only(np.where(valued, by_channel, np.nan)))
+        elif self.conversions is None and self.curves is None:
             static = StaticEstimate(*inputs)
         else:
             converted = np.concatenate(

@@ -1,8 +1,8 @@
 """Raw samples of one device, for ``tactile-gateway tare``: the registers of the read plan,
 decoded (counts or resistances), not converted to force.
 
-The device's checks run first (``identity.verify_device``), so a tare is never taken from a
-device that is not the one the configuration describes.
+The device's checks and set-up writes run first (``identity.prepare_device``), so a tare is
+never taken from a device that is not the one the configuration describes, or in another mode.
 """
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ from ..modbus.client import ModbusTransport
 from ..modbus.image import RawSample, RegisterImage, RegisterKind, decode_sample
 from ..modbus.plan import MERGE_GAP, device_plan
 from ..modbus.transport import Transport
-from .identity import verify_device
+from .identity import prepare_device
+from .requests import read_request
 
 __all__ = ["sample_device"]
 
@@ -34,18 +35,13 @@ async def sample_device(
     plan = device_plan(device, bus.max_read_registers, MERGE_GAP, clock=False)
     samples: list[tuple[float, RawSample]] = []
     async with transport_factory(bus) as transport:
-        await verify_device(transport, device)
+        await prepare_device(transport, device)
         start = time.monotonic()
         next_poll = start
         while True:
             reads: list[tuple[RegisterKind, int, list[int]]] = []
             for req in plan:
-                kind: RegisterKind = "input" if req.kind == "input" else "holding"
-                if kind == "input":
-                    regs = await transport.read_input_registers(device.device_id, req.address, req.count)
-                else:
-                    regs = await transport.read_holding_registers(device.device_id, req.address, req.count)
-                reads.append((kind, req.address, regs))
+                reads.append((req.kind, req.address, await read_request(transport, device.device_id, req)))
             now = time.monotonic()
             samples.append((now, decode_sample(device, RegisterImage.from_reads(reads))))
             if now - start >= duration_s:

@@ -8,11 +8,19 @@ import math
 import re
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from gateway.analysis.tare import MIN_POLLS, TareError, compute_tare
+from gateway.analysis.tare import (
+    MIN_POLLS,
+    ChannelSeries,
+    TareError,
+    compute_tare,
+    compute_tare_series,
+    index_ranges,
+)
 from gateway.config import DeviceConfig, load_config, parse_config
 from gateway.config.editor import set_device_array
 from gateway.errors import ConfigError
@@ -53,7 +61,7 @@ def samples(counts: np.ndarray) -> list[RawSample]:
     return [RawSample(counts=np.asarray(row, dtype=np.uint16)) for row in counts]
 
 
-def refusal(device: DeviceConfig, polls: Sequence[RawSample], **limits: float) -> str:
+def refusal(device: DeviceConfig, polls: Sequence[RawSample], **limits: Any) -> str:
     with pytest.raises(TareError) as err:
         compute_tare(device, polls, **limits)
     return str(err.value)
@@ -89,7 +97,8 @@ def test_a_drifting_channel_is_refused_by_name() -> None:
     # averages 15 / 10 = 1.5, its last third 85 / 10 = 8.5 above 3890: a drift of +7 counts
     counts[:, 7] = 3890 + np.rint(10 * np.arange(30) / 29).astype(int)
     message = refusal(acme(), samples(counts))
-    assert message.startswith("not still: ch07 (+7 counts over the window) drift;")
+    assert message.startswith("the array is moving: ch07 (+7 counts over the sampling window) (first third")
+    assert "allowed: 2 counts or 4 standard errors" in message and "wiring" not in message
     assert message.endswith("nothing was written")
     assert "ch06" not in message and "ch08" not in message
 
@@ -106,7 +115,11 @@ def test_a_noisy_channel_is_refused_by_name() -> None:
     # ch03 alternates 3895 +- 12: every third averages 3895 (no drift), std = 12 sqrt(30 / 29)
     counts[:, 3] = REST + 12 * np.where(np.arange(30) % 2 == 0, 1, -1)
     message = refusal(acme(), samples(counts))
-    assert message.startswith("too noisy: ch03 (std 12.2) above 8 counts;")
+    assert message.startswith(
+        "too noisy over the sampling window: ch03 (std 12.2 counts); "
+        "allowed: at most 8 counts (--max-noise); "
+        "the array is still and unloaded, so check the wiring or shielding"
+    )
     assert message.endswith("nothing was written")
     assert 12 * math.sqrt(30 / 29) == pytest.approx(12.205, abs=1e-3)
     # a higher limit lets it through (at the mean, 3895)
@@ -119,8 +132,12 @@ def test_a_channel_the_model_reads_as_loaded_is_refused() -> None:
     # ch10 at 3700 counts: 10k * 3700 / 395 = 93670.9 ohm, about 1.0 N (R(1 N) = 93.75 kohm)
     counts[:, 10] = 3700
     message = refusal(acme(), samples(counts))
-    assert message.startswith("looks loaded: ch10 (1 N by the model, 9.367e+04 ohm)")
-    assert "more than 0.5 N, or 3x the median channel's conductance" in message
+    assert message.startswith(
+        "the array is loaded over the sampling window: "
+        "ch10 (1 N by the model at 9.367e+04 ohm, 2.1x the median conductance); "
+        "allowed at rest: at most 0.5 N (--max-force) and 3x the median channel's conductance."
+    )
+    assert "(--channels 0-9,11-35)" in message
     assert message.endswith("nothing was written")
     # with a higher force limit, 93.67 kohm is still 2.08x the median conductance: accepted
     ratio = REST_OHM / (10000 * 3700 / 395)
@@ -134,7 +151,10 @@ def test_a_channel_at_three_times_the_median_conductance_is_loaded() -> None:
     # channel's conductance (> 3x); the model's 1.9 N there is allowed by max_force_n = 100
     counts[:, 20] = 3412
     message = refusal(acme(), samples(counts), max_force_n=100.0)
-    assert message.startswith("looks loaded: ch20 (1.9 N by the model, 4.996e+04 ohm)")
+    assert message.startswith(
+        "the array is loaded over the sampling window: ch20 (1.9 N by the model at 4.996e+04 ohm, "
+        "3.9x the median conductance)"
+    )
     # ch21 at 3564 counts: 10k * 3564 / 531 = 67119 ohm, 2.90x: not loaded
     counts[:, 20] = REST
     counts[:, 21] = 3564
@@ -195,8 +215,11 @@ def test_a_float_device_is_tared_in_ohm() -> None:
     np.testing.assert_allclose(result.values, REST_OHM, rtol=1e-12)
     # 2 % of the reading is the noise limit: +-3 % swings are too noisy
     noisy = [RawSample(resistance_ohm=REST_OHM * (1 + 0.03 * (-1) ** i) * np.ones(4)) for i in range(30)]
-    assert refusal(device, noisy).startswith("too noisy: ch00 (std ")
-    assert "above 2 % of the reading" in refusal(device, noisy)
+    # std of +-3 % over 30 polls: 3 sqrt(30 / 29) = 3.05 % of the mean, 194750 ohm
+    assert refusal(device, noisy).startswith(
+        "too noisy over the sampling window: ch00 (std 3.05 % of 1.948e+05 ohm)"
+    )
+    assert "allowed: at most 2 % of the reading" in refusal(device, noisy)
 
 
 @pytest.mark.parametrize("case", ["few polls", "wrong encoding", "drift", "noise", "loaded", "faulty"])
@@ -220,6 +243,102 @@ def test_every_refusal_says_nothing_was_written(case: str) -> None:
         counts[:, 1] = 0
         polls = samples(counts)
     assert refusal(acme(), polls).endswith("; nothing was written")
+
+
+# --------------------------------------------------------------------------- the cause, in order
+BLOB = [14, 15, 20, 21]  # a blob resting on the middle 2 x 2 cells
+
+
+def busy() -> np.ndarray:
+    """The user's array: a blob loads the middle four cells (3700 counts, 1.0 N each by the
+    model) and their readings scatter +-12 counts (std 12.2 > the 8-count noise limit)."""
+    counts = still()
+    for ch in BLOB:
+        counts[:, ch] = 3700 + 12 * np.where(np.arange(30) % 2 == 0, 1, -1)
+    return counts
+
+
+def test_a_loaded_noisy_array_is_called_loaded_not_noisy() -> None:
+    message = refusal(acme(), samples(busy()))
+    # 3700 counts: 10k * 3700 / 395 = 93670.9 ohm; 194750 / 93670.9 = 2.08x the median conductance
+    one = "1 N by the model at 9.367e+04 ohm, 2.1x the median conductance"
+    assert message.startswith(
+        "the array is loaded over the sampling window: "
+        f"ch14 ({one}), ch15 ({one}), ch20 ({one}), ch21 ({one}); "
+        "allowed at rest: at most 0.5 N (--max-force) and 3x the median channel's conductance."
+    )
+    # the ways out: the unloaded channels by index, a record, the device's own zero
+    assert "tare only the unloaded channels (--channels 0-13,16-19,22-35)" in message
+    assert "--from-record RECORD.csv --start-s S --end-s E" in message
+    assert "--device-zero" in message
+    assert "noisy" not in message and "wiring" not in message and "shielding" not in message
+    assert message.endswith("; nothing was written")
+
+
+def test_the_unloaded_channels_of_a_loaded_array_are_tared_alone() -> None:
+    rest = [c for c in range(N) if c not in BLOB]
+    result = compute_tare(acme(), samples(busy()), channels=rest)
+    assert result.channels == tuple(rest)
+    assert result.values == (3895.0,) * 32
+    assert len(result.resistance_ohm) == len(result.noise) == 32
+    # one loaded channel among the chosen ones is refused, named by its own name
+    message = refusal(acme(), samples(busy()), channels=[0, 1, 2, 3, 14])
+    assert message.startswith("the array is loaded over the sampling window: ch14 (1 N by the model")
+    assert "(--channels 0-3)" in message
+
+
+def test_a_drift_with_times_gives_its_rate_and_comes_before_noise() -> None:
+    counts = still()
+    counts[:, 7] = 3890 + np.rint(10 * np.arange(30) / 29).astype(int)  # +7 counts (see above)
+    counts[:, 3] = REST + 12 * np.where(np.arange(30) % 2 == 0, 1, -1)  # noisy, but second
+    # polls every 0.1 s: the first third's mean time is 0.45 s, the last third's 2.45 s:
+    # +7 counts in 2 s = +3.5 counts/s
+    times = [0.1 * k for k in range(30)]
+    message = refusal(acme(), samples(counts), times_s=times, window="the 3 s sampled")
+    assert message.startswith("the array is moving: ch07 (+7 counts over the 3 s sampled, +3.5 counts/s)")
+    assert "ch03" not in message and "wiring" not in message
+
+
+def test_a_step_is_moving_not_noise() -> None:
+    counts = still()
+    # a load lands on ch07 half-way: 3895 for 15 polls, then 3865. Its std over the 30 polls
+    # is 15 sqrt(30 / 29) = 15.3 counts, above the 8-count noise limit, but each third is flat
+    # (+-2 counts): the first third reads 3895, the last 3865, a drift of -30 counts
+    counts[15:, 7] -= 30
+    message = refusal(acme(), samples(counts))
+    assert message.startswith("the array is moving: ch07 (-30 counts over the sampling window)")
+    assert "noisy" not in message and "wiring" not in message
+
+
+def test_a_drift_in_ohm_is_given_in_percent_per_second() -> None:
+    sim = 'profile = "tactile-sim"\nchannels = 4\nencoding = "float32"'
+    device = acme(CONFIG.replace('profile = "acme-at6x6"', sim))
+    # ch02 rises 0.1 % per poll, 30 polls 0.5 s apart: the thirds' means differ by 20 polls,
+    # 2 % of 194750 ohm over 10 s: +2 % and +0.2 %/s (mean 1.0145 x 194750 -> +1.97 %)
+    k = np.arange(30)
+    series = [ChannelSeries(i, np.full(30, REST_OHM), 0.5 * k) for i in range(4)]
+    series[2] = ChannelSeries(2, REST_OHM * (1 + 0.001 * k), 0.5 * k)
+    with pytest.raises(TareError) as err:
+        compute_tare_series(device, series, counts=False, window="0-14.5 s of r.csv")
+    # drift 20 * 0.001 * 194750 = 3895 ohm over the mean 1.0145 * 194750: 1.971 %; per s / 10
+    assert str(err.value).startswith("the array is moving: ch02 (+1.97 % over 0-14.5 s of r.csv, +0.197 %/s)")
+    assert "allowed: 0.5 % of the reading or 4 standard errors" in str(err.value)
+
+
+def test_a_record_window_with_too_few_rows_is_named() -> None:
+    sim = 'profile = "tactile-sim"\nchannels = 4\nencoding = "float32"'
+    device = acme(CONFIG.replace('profile = "acme-at6x6"', sim))
+    series = [ChannelSeries(i, np.full(12 if i else 4, REST_OHM)) for i in range(4)]
+    with pytest.raises(TareError) as err:
+        compute_tare_series(device, series, counts=False, window="2-3 s of r.csv")
+    assert str(err.value).startswith(
+        "too few polls in 2-3 s of r.csv: ch00 (4 polls); a tare needs at least 10"
+    )
+
+
+def test_index_ranges() -> None:
+    assert index_ranges([5, 0, 1, 2, 7, 8]) == "0-2,5,7-8"
+    assert index_ranges([3]) == "3"
 
 
 # --------------------------------------------------------------------------- set_device_array

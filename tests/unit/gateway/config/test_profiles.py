@@ -59,7 +59,9 @@ def values(items: Sequence[object]) -> str:
 # --------------------------------------------------------------------------- shipped profiles
 def test_the_shipped_profiles_are_listed_with_their_descriptions() -> None:
     shipped = builtin_profiles()
-    assert list(shipped) == ["acme-at6x6", "generic-adc", "tactile-sim"]
+    assert list(shipped) == [
+        "acme-at6x6", "dfrobot-6x6", "generic-adc", "skin60-counts", "skin60-mn", "tactile-sim"
+    ]  # fmt: skip
     assert shipped["acme-at6x6"] == "Acme Tactile AT-6x6, 36 cells, 12-bit low-side divider"
     assert shipped["tactile-sim"] == "tactile-gateway simulated array (docs/register-map.md)"
     assert all(shipped.values())
@@ -196,11 +198,11 @@ def test_an_unknown_profile_lists_the_shipped_ones_with_a_suggestion() -> None:
     message = refusal('profile = "acme-at6"\n')
     assert message == (
         f"{SOURCE}: {DEV}.profile: no profile 'acme-at6'; did you mean 'acme-at6x6'? "
-        "(shipped profiles: acme-at6x6, generic-adc, tactile-sim; "
+        "(shipped profiles: acme-at6x6, dfrobot-6x6, generic-adc, skin60-counts, skin60-mn, tactile-sim; "
         "or the path of a profile file ending in .toml)"
     )
     message = refusal('profile = "zzzz"\n')
-    assert "no profile 'zzzz' (shipped profiles: acme-at6x6, generic-adc, tactile-sim;" in message
+    assert "no profile 'zzzz' (shipped profiles: acme-at6x6, dfrobot-6x6, generic-adc," in message
     assert "did you mean" not in message
 
 
@@ -514,3 +516,26 @@ def test_a_key_after_a_table_header_is_named_in_the_profile_file(tmp_path: Path)
     )
     message = refusal('profile = "board.toml"\n', tmp_path / "gateway.toml")
     assert message.startswith(f"{profile}: registers.clock: unknown key"), message
+
+
+def test_the_public_map_profiles_read_their_frames_writes_and_checks() -> None:
+    """dfrobot-6x6: counts at input 7, ids and count checked, nothing written; skin60-mn: force
+    in mN by function 0x42, its mode written and read back at connect, a zero action."""
+    board = device('profile = "dfrobot-6x6"\n')
+    frame = board.registers.frame
+    assert frame is not None and (frame.quantity, frame.table, frame.blocks[0].address) == (
+        "counts",
+        "input",
+        7,
+    )
+    assert board.n_channels == 36 and board.registers.setup == () and board.registers.actions == ()
+    assert [(c.address, c.value) for c in board.checks.registers] == [(0, 0x3343), (1, 0x3343), (43, 36)]
+    skin = device('profile = "skin60-mn"\n')
+    frame = skin.registers.frame
+    assert frame is not None and frame.vendor is not None and frame.vendor.function_code == 0x42
+    assert (frame.quantity, frame.unit, skin.encoding, skin.n_channels) == ("force", "mN", "output", 60)
+    assert [(w.address, w.values, w.verify) for w in skin.registers.setup] == [
+        (2, (1,), True),
+        (5, (0,), True),
+    ]
+    assert dict(skin.registers.actions)["zero"][0].address == 3

@@ -1,0 +1,124 @@
+"""What the gateway does with a device, in words: where its values come from, what turns them
+into force, which effects are tracked and by which clock, where each channel's parameters
+come from, and which forces rest on assumed circuit values rather than on a calibration.
+
+``check-config`` and ``poll-once`` print these lines, so a user can see whether drift
+correction is on without reading the code.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from ..config import DeviceConfig
+from ..model.conversion import LineConversion
+from ..model.curves import CurveChannel
+
+__all__ = ["device_summary"]
+
+_SOURCE_TEXT = {
+    "defaults": "the defaults (docs/parameters.md)",
+    "config": "the device's [bus.device.model.params]",
+    "calibration": "the calibration file",
+    "channel": "the channel's own entry",
+}
+
+
+def _clock(device: DeviceConfig) -> str:
+    clock = device.registers.clock
+    if clock is None:
+        return "timed by the host's monotonic clock"
+    return f"timed by the device clock ({clock.table} {clock.address}, {clock.unit}; the host's if it stalls)"
+
+
+def _values(device: DeviceConfig) -> str:
+    frame = device.registers.frame
+    if frame is not None:
+        return f"values: {frame.describe()}"
+    regs = device.registers
+    if device.encoding == "adc":
+        return f"values: ADC counts, uint16, {regs.table} registers {regs.adc_address}+{device.n_channels}"
+    span = f"{regs.float_address}+{2 * device.n_channels}"
+    return f"values: resistance in ohm, float32, {regs.table} registers {span}"
+
+
+def _tracking(device: DeviceConfig) -> list[str]:
+    """One line per way channels are read, with the effects tracked and the clock."""
+    chans = device.enabled_channels
+    if device.encoding == "output":
+        drift = device.output_drift
+        if drift is None or not drift.active:
+            return [
+                f"force: the device's own calibrated output, passed through "
+                f"({len(chans)} channels; no drift correction)"
+            ]
+        return [
+            f"force: the device's own calibrated output with drift correction ({drift.form}), "
+            f"{_clock(device)} ({len(chans)} channels)"
+        ]
+    lines = []
+    by_way: Counter[str] = Counter()
+    for ch in chans:
+        if isinstance(ch.conversion, CurveChannel):
+            way = f"calibration curve {ch.conversion.describe()}"
+            if ch.conversion.drift.active:
+                way += f" (drift correction on, {_clock(device)})"
+            else:
+                way += " (no drift correction)"
+        elif ch.conversion is not None:
+            kind = "line" if isinstance(ch.conversion, LineConversion) else "lookup"
+            way = f"calibration {kind} (static: no drift correction)"
+        else:
+            tracked = [e for e in ch.effects if e in ("creep", "hysteresis", "creep2", "temperature")]
+            dynamic = [e for e in tracked if e != "temperature"]
+            way = f"physical model, effects {', '.join(ch.effects)}"
+            way += (
+                f" (drift correction on: {', '.join(dynamic)}, {_clock(device)})"
+                if dynamic
+                else " (no drift correction)"
+            )
+        by_way[way] += 1
+    for way, count in by_way.items():
+        lines.append(f"force: {way}: {count} channel{'s' if count != 1 else ''}")
+    return lines
+
+
+def _sources(device: DeviceConfig) -> str:
+    if device.encoding == "output":
+        return "parameters: none of ours (the device turns its readings into force with its own table)"
+    counts: Counter[tuple[str, ...]] = Counter(ch.params_source for ch in device.channels)
+    parts = [
+        f"{n} from {' + '.join(_SOURCE_TEXT[s] for s in source)}" for source, n in sorted(counts.items())
+    ]
+    return "parameters: " + "; ".join(parts)
+
+
+def _assumptions(device: DeviceConfig) -> str:
+    """Which forces rest on assumed circuit values, which on a calibration."""
+    chans = device.enabled_channels
+    if device.encoding == "output":
+        return "assumes: nothing of the circuit (the device reports force itself)"
+    calibrated = sum(1 for ch in chans if "calibration" in ch.params_source)
+    circuit = (
+        "the front end's values (reference resistor, full scale)"
+        if device.encoding == "adc"
+        else "nothing of the circuit (the device reports ohm)"
+    )
+    if calibrated == len(chans):
+        return f"assumes: {circuit}; forces rest on the calibration of every channel"
+    if calibrated:
+        rest = len(chans) - calibrated
+        return f"assumes: {circuit}; {calibrated} channels calibrated, {rest} on default parameters"
+    return f"assumes: {circuit} and the default sensor parameters: no channel is calibrated (see `calibrate`)"
+
+
+def device_summary(device: DeviceConfig) -> list[str]:
+    """The lines (module docstring), without indentation."""
+    lines = [_values(device), *_tracking(device), _sources(device), _assumptions(device)]
+    for w in device.registers.setup:
+        lines.append(f"set-up at connect: {w.describe()}")
+    for name, writes in device.registers.actions:
+        lines.append(f"action {name}: " + "; ".join(w.describe() for w in writes))
+    if not device.registers.setup and not device.registers.actions:
+        lines.append("writes: none (nothing is ever written to this device)")
+    return lines
