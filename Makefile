@@ -5,7 +5,7 @@ STAMP   := $(VENV)/.installed
 SYSDEPS := socat prometheus mosquitto chromium
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: test lint bench demo venv sysdeps clean stress-test soak
+.PHONY: test lint bench demo venv sysdeps clean stress-test soak screenshots
 
 $(STAMP): pyproject.toml
 	python3 -m venv $(VENV)
@@ -53,6 +53,15 @@ stress-test: $(STAMP) sysdeps
 
 demo: $(STAMP)
 	$(VENV)/bin/tactile-gateway demo
+
+# The docs' screenshots of the page, made by the tests that check what they show (headless
+# chromium through Playwright): the live page at the demo's forces and the playback of a record.
+screenshots: $(STAMP) sysdeps
+	TACTILE_SCREENSHOT_DEMO=$(CURDIR)/docs/screenshot-pressure-map.png \
+	TACTILE_SCREENSHOT_PLAYBACK=$(CURDIR)/docs/screenshot-playback.png \
+	$(PY) -m pytest -q \
+		tests/integration/test_web_page.py::test_auto_range_makes_the_peak_bright_at_demo_forces \
+		tests/integration/test_web_playback.py::test_playback_moves_through_the_record
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache *.egg-info

@@ -7,6 +7,7 @@ import contextlib
 import datetime
 import logging
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -49,17 +50,20 @@ async def record_live(
     show_progress: bool = True,
     until: Callable[[], bool] | None = None,
     keep_existing_if_empty: bool = False,
+    cancel: asyncio.Event | None = None,
 ) -> RecorderStats:
     """Poll with ``config`` for ``duration_s`` seconds, or until ``until()`` holds (checked
     every 50 ms), and write a record to ``out_path``: into a temporary file beside it, renamed
     over it at the end (also after SIGINT/SIGTERM), so that a killed recording never leaves a
     file that looks like a complete record. With ``keep_existing_if_empty`` (``out_path``
-    exists) a recording without a sample leaves ``out_path`` as it was."""
+    exists) a recording without a sample leaves ``out_path`` as it was. With ``cancel`` the
+    caller handles SIGINT/SIGTERM: once ``cancel`` is set the recording ends and writes nothing
+    (``out_path`` is left as it was)."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its errors reach us as read errors
-    stop = asyncio.Event()
+    stop = asyncio.Event() if cancel is None else cancel
     loop = asyncio.get_running_loop()
     handled = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in (signal.SIGINT, signal.SIGTERM) if cancel is None else ():
         with contextlib.suppress(RuntimeError, ValueError, NotImplementedError):
             loop.add_signal_handler(sig, stop.set)
             handled.append(sig)
@@ -88,7 +92,9 @@ async def record_live(
                         await asyncio.wait_for(stop.wait(), timeout=wait_s)
             if show_progress:
                 _progress(min(time.monotonic() - t0, duration_s), duration_s, recorder.stats, final=True)
-            if keep_existing_if_empty and recorder.stats.rows == 0:
+            if (keep_existing_if_empty and recorder.stats.rows == 0) or (
+                cancel is not None and cancel.is_set()
+            ):
                 return recorder.stats  # the temporary file is removed below
             fh.flush()
             os.fsync(fh.fileno())
@@ -172,7 +178,7 @@ def _played(array: Any, end_s: float) -> Callable[[], bool]:
 MAX_UNSEEN_DEVICE_S = 4.0
 
 
-async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, object]:
+async def _paper_records(out_dir: Path, speed: float, cancel: asyncio.Event) -> tuple[Path, Path, object]:
     from sim_device import ArrayConfig, SimArray, serve_tcp
 
     from ..config import bus_config_for, device_config_for, gateway_config_for
@@ -211,10 +217,59 @@ async def _paper_records(out_dir: Path, speed: float) -> tuple[Path, Path, objec
                     device=name,
                     show_progress=False,
                     until=_played(array, end_s),
+                    cancel=cancel,
                 )
             )
         await asyncio.gather(*records)
     return creep_path, stair_path, creep_params[0]
+
+
+class _Stopped(Exception):
+    """SIGINT or SIGTERM arrived during ``paper``."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+class _PaperSignals:
+    """SIGINT/SIGTERM for ``paper``: while its recordings run, a signal sets their ``cancel``
+    event (they end and write nothing); at any other moment it raises :class:`_Stopped`."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self._live: tuple[asyncio.AbstractEventLoop, asyncio.Event] | None = None
+        self._old: dict[int, Any] = {}
+
+    def __enter__(self) -> _PaperSignals:
+        self._old = {sig: signal.signal(sig, self._on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._old.items():
+            signal.signal(sig, handler)
+
+    def _on_signal(self, signum: int, frame: object) -> None:
+        if self.signum is None:
+            self.signum = signum
+        if self._live is not None:
+            loop, cancel = self._live
+            loop.call_soon_threadsafe(cancel.set)
+        else:
+            raise _Stopped(self.signum)
+
+    async def records(self, out_dir: Path, speed: float) -> tuple[Path, Path, object]:
+        """:func:`_paper_records`, ended early by a signal (then :class:`_Stopped`)."""
+        cancel = asyncio.Event()
+        self._live = (asyncio.get_running_loop(), cancel)
+        try:
+            if self.signum is None:
+                result = await _paper_records(out_dir, speed, cancel)
+        finally:
+            self._live = None
+        if self.signum is not None:
+            raise _Stopped(self.signum)
+        return result
 
 
 @click.command("paper")
@@ -236,8 +291,10 @@ def paper(out_dir: Path, speed: float) -> None:
         raise click.UsageError(
             f"--out: {out_dir} exists and is not a directory (paper writes records and plots into one)"
         )
+    created = not out_dir.exists()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
+        work = Path(tempfile.mkdtemp(dir=out_dir, prefix=".paper-", suffix=".tmp"))
     except OSError as exc:
         raise click.UsageError(
             f"--out: cannot create the directory {out_dir}: {exc.strerror or exc}"
@@ -246,12 +303,34 @@ def paper(out_dir: Path, speed: float) -> None:
         f"recording the creep tests and a staircase through Modbus (about {5400 / speed:.0f} s; longer on "
         "a busy machine: the simulated clock waits for late polls) ..."
     )
-    creep_path, stair_path, true = asyncio.run(_paper_records(out_dir, speed))
-    assert isinstance(true, SensorParams)
-    creep = read_record(creep_path, require_force=True).channel()
-    stair = read_record(stair_path, require_force=True).channel()
-    result = analyze(creep, stair, true)
-    for path in write_outputs(
-        result, out_dir, f"{creep_path.name}, {stair_path.name} (recorded through Modbus)"
-    ):
+    # Everything is written into ``work`` and moved into ``out_dir`` only once complete, with
+    # the signals blocked, so that a stopped replay leaves no file behind.
+    written: list[Path] = []
+    try:
+        with _PaperSignals() as signals:
+            creep_path, stair_path, true = asyncio.run(signals.records(work, speed))
+            assert isinstance(true, SensorParams)
+            creep = read_record(creep_path, require_force=True).channel()
+            stair = read_record(stair_path, require_force=True).channel()
+            result = analyze(creep, stair, true)
+            outputs = write_outputs(
+                result, work, f"{creep_path.name}, {stair_path.name} (recorded through Modbus)"
+            )
+            blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+            try:
+                for path in (creep_path, stair_path, *outputs):
+                    os.replace(path, out_dir / path.name)
+                    written.append(out_dir / path.name)
+            finally:
+                shutil.rmtree(work, ignore_errors=True)
+                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+    except _Stopped as stopped:
+        shutil.rmtree(work, ignore_errors=True)
+        if created:
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()
+        name = signal.Signals(stopped.signum).name
+        click.echo(f"paper: stopped by {name}; nothing written", err=True)
+        sys.exit(128 + stopped.signum)
+    for path in written[2:]:
         click.echo(str(path))

@@ -303,6 +303,8 @@ class MetricsServer:
         self.header_timeout_s = header_timeout_s
         self.auth_queue = auth_queue
         self._auth_pending = 0  # bcrypt checks queued or running (the server's loop only)
+        #: those checks, each with the request task that awaits it (the server's loop only)
+        self._auth_checks: dict[asyncio.Future[bool], asyncio.Task[Any] | None] = {}
         self.counters = HttpCounters()
         self._request_log = _RequestLog(self.counters)
         #: requests to anything but /metrics (the page, its event streams) served at once; the
@@ -386,14 +388,16 @@ class MetricsServer:
                     self.counters.refuse("auth_queue")
                     return busy(b"too many logins being checked\n")
                 self._auth_pending += 1
+                check = asyncio.get_running_loop().run_in_executor(self._auth_pool, self._auth.check, header)
+                self._auth_checks[check] = asyncio.current_task()
                 try:
-                    loop = asyncio.get_running_loop()
-                    ok = await loop.run_in_executor(self._auth_pool, self._auth.check, header)
+                    ok = await check
                 except Exception as exc:  # never expected; a client must not be able to fill the log
                     log.debug("basic auth check failed: %r", exc)
                     ok = False
                 finally:
                     self._auth_pending -= 1
+                    self._auth_checks.pop(check, None)
             if not ok:
                 return _text(401, b"Unauthorized\n", {"WWW-Authenticate": 'Basic realm="tactile-gateway"'})
         if request.method not in ("GET", "HEAD"):
@@ -499,7 +503,18 @@ class MetricsServer:
             await self._stopping.wait()
         finally:
             listener.close()
+            await self._cancel_auth_checks()
             await runner.cleanup()
+
+    async def _cancel_auth_checks(self) -> None:
+        """Cancel the bcrypt checks queued or running and wait for the requests awaiting them
+        to end. A request whose client has gone is no longer one of the connections the
+        runner's clean-up waits for; left pending, its task would be destroyed with the loop."""
+        waiting = [task for task in self._auth_checks.values() if task is not None]
+        for check in list(self._auth_checks):
+            check.cancel()
+        if waiting:
+            await asyncio.wait(waiting)
 
     def _run(self, ready: threading.Event, failure: list[BaseException]) -> None:
         loop = self._loop

@@ -39,6 +39,7 @@ import struct
 from typing import Any, Final
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..errors import GatewayError
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
@@ -58,10 +59,6 @@ def _opt(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else float(value)
 
 
-def _values(array: Any) -> list[float | None]:
-    return finite_or_none(np.asarray(array, dtype=np.float64))
-
-
 def _num(value: float) -> float:
     """A published float: rounded to ``DECIMALS`` (finite values only reach here)."""
     return round(float(value), DECIMALS)
@@ -74,6 +71,13 @@ def _opt_num(value: float | None) -> float | None:
 
 def _num_values(array: Any) -> list[float | None]:
     return finite_or_none(np.asarray(array, dtype=np.float64), DECIMALS)
+
+
+def _float32_values(array: NDArray[np.float32]) -> list[float | None]:
+    """Received float32 values as published floats: each the shortest decimal that reads back
+    as the same float32 (not the float64 it widens to, ``0.10000000149011612`` for 0.1), then
+    rounded to ``DECIMALS`` as a JSON frame's are; None where not finite."""
+    return [round(float(str(v)), DECIMALS) if np.isfinite(v) else None for v in array]
 
 
 def frame_dict(snapshot: DeviceSnapshot, sequence: int) -> dict[str, Any]:
@@ -131,7 +135,8 @@ _FLOAT_KEYS: Final = ("force_n", "force_static_n", "resistance_ohm")
 
 
 def decode_binary(data: bytes, device: str = "", channels: list[str] | None = None) -> dict[str, Any]:
-    """A binary frame back into the fields of ``frame_dict`` (floats to float32 precision).
+    """A binary frame back into the fields of ``frame_dict`` (the per-channel floats to float32
+    precision, printed as the shortest decimal of that precision and rounded as in JSON).
     ``device`` and ``channels`` come from the topic and the meta message. ``FrameDecodeError``
     if the bytes are not a frame."""
     if len(data) < _HEADER.size:
@@ -145,7 +150,7 @@ def decode_binary(data: bytes, device: str = "", channels: list[str] | None = No
     offset = _HEADER.size
     values: dict[str, list[float | None]] = {}
     for key in _FLOAT_KEYS:
-        values[key] = _values(np.frombuffer(data, dtype="<f4", count=n, offset=offset))
+        values[key] = _float32_values(np.frombuffer(data, dtype="<f4", count=n, offset=offset))
         offset += 4 * n
     codes = np.frombuffer(data, dtype=np.uint8, count=n, offset=offset).tolist()
     if any(c >= len(STATUS_LABELS) for c in codes):

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
+import struct
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
@@ -19,8 +21,9 @@ from prometheus_client import CollectorRegistry, generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from test_gateway_tcp import array_device
 
-from gateway.config import BusConfig, DeviceConfig, bus_config_for, gateway_config_for
+from gateway.config import BusConfig, DeviceConfig, bus_config_for, device_config_for, gateway_config_for
 from gateway.metrics.collector import make_registry
+from gateway.model import SensorParams
 from gateway.runtime.poller import Poller, SnapshotHolder
 from sim_device import ArrayConfig, SimArray, serve_tcp
 
@@ -167,3 +170,56 @@ async def test_device_switched_off_and_on(rig: Rig) -> None:
     await rig.power_on()
     await wait_for(lambda: rig.metric("tactile_device_up", device="a") == 1.0, 5, "a back up after power on")
     assert rig.status() in ("ok", "no_contact")
+
+
+async def _wrong_mbap_length(reader: asyncio.StreamReader, writer: asyncio.StreamWriter, delta: int) -> None:
+    """A Modbus/TCP device whose read answers are whole, but whose MBAP header's length field
+    is off by ``delta`` bytes from what follows it."""
+    try:
+        while True:
+            transaction, _, length, unit = struct.unpack(">HHHB", await reader.readexactly(7))
+            pdu = await reader.readexactly(length - 1)
+            function, _, count = struct.unpack(">BHH", pdu[:5])
+            body = bytes([function, 2 * count]) + b"\x01\x00" * count
+            writer.write(struct.pack(">HHHB", transaction, 0, len(body) + 1 + delta, unit) + body)
+            await writer.drain()
+    except (asyncio.IncompleteReadError, ConnectionError):
+        pass
+    finally:
+        writer.close()
+
+
+@pytest.mark.parametrize("delta", [-2, 3], ids=["length-short", "length-long"])
+async def test_a_wrong_mbap_length_is_a_decode_error_logged_once(
+    delta: int, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.CRITICAL, logger="pymodbus")  # as the CLI: its errors reach us as ours
+    caplog.set_level(logging.INFO)  # after: this one sets the capturing handler's level
+    server = await asyncio.start_server(lambda r, w: _wrong_mbap_length(r, w, delta), "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    device = device_config_for("a", 1, [SensorParams()] * 4, 2, 2.5)
+    bus = bus_config_for(
+        "bus-a", "tcp", [device], host="127.0.0.1", port=port, poll_interval_s=POLL_S,
+        timeout_s=0.2, retries=0, backoff_initial_s=0.02, backoff_max_s=0.05,
+    )  # fmt: skip
+    holder = SnapshotHolder()
+
+    def decode_errors() -> int:
+        counters = holder.get().counters.get("a")
+        return 0 if counters is None else counters.read_errors_total["decode"]
+
+    async with server, Poller(gateway_config_for([bus]), holder):
+        await wait_for(lambda: decode_errors() >= 5, 10, "five decode errors")
+    counters = holder.get().counters["a"]
+    assert dict(counters.read_errors_total) == {
+        **dict.fromkeys(counters.read_errors_total, 0),
+        "decode": counters.reads_total,
+    }
+    snap = holder.get().devices["a"]
+    assert not snap.up and snap.error is not None
+    assert {c.status.label for c in snap.channels()} == {"stale"}
+    assert "Traceback" not in caplog.text
+    assert [r for r in caplog.records if r.exc_info or r.exc_text] == []
+    about_a = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(about_a) == 1, caplog.text
+    assert about_a[0].name == "gateway.runtime.bus" and "device a on bus bus-a" in about_a[0].getMessage()

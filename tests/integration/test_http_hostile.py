@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import dataclasses
+import gc
 import logging
 import socket
 import threading
@@ -20,6 +21,7 @@ from prometheus_client import CollectorRegistry
 from prometheus_client.parser import text_string_to_metric_families
 from web_fixtures import gateway_with_page, until
 
+from gateway.metrics import server as server_module
 from gateway.metrics.collector import make_registry
 from gateway.metrics.server import AUTH_QUEUE, MetricsServer
 from gateway.metrics.web_config import WebConfig
@@ -214,3 +216,39 @@ async def test_wrong_passwords_beyond_the_bcrypt_queue_are_refused_at_once() -> 
                 assert refusals["auth_queue"] == flood - AUTH_QUEUE + 1
     finally:
         gate.set()
+
+
+async def test_stopping_with_bcrypt_checks_queued_leaves_no_pending_task(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # cost 12: a check takes ~0.2-0.4 s, so the queued checks outlast the (shortened) grace
+    # the server gives its connections' handlers when it stops
+    monkeypatch.setattr(server_module, "SHUTDOWN_TIMEOUT_S", 0.05)
+    hashed = bcrypt.hashpw(b"correct horse", bcrypt.gensalt(rounds=12))
+    registry = make_registry(SnapshotHolder().get, CollectorRegistry())
+    server = MetricsServer(registry, "127.0.0.1", 0, WebConfig(basic_auth_users={"prometheus": hashed}))
+    caplog.set_level(logging.DEBUG)
+    handled: list[dict[str, object]] = []
+    socks = []
+    server.start()
+    try:
+        loop = server._loop
+        assert loop is not None
+        loop.call_soon_threadsafe(loop.set_exception_handler, lambda _, context: handled.append(context))
+        wrong = b"Authorization: Basic " + base64.b64encode(b"prometheus:wrong") + b"\r\n"
+        for _ in range(AUTH_QUEUE):
+            s = socket.create_connection(("127.0.0.1", server.port), timeout=10)
+            s.sendall(b"GET /metrics HTTP/1.1\r\nHost: x\r\n" + wrong + b"\r\n")
+            socks.append(s)
+        await until(lambda: server._auth_pending == AUTH_QUEUE, 20, "a full bcrypt queue")
+        for s in socks:  # the clients give up: nothing waits for their answers any more
+            s.close()
+    finally:
+        for s in socks:
+            s.close()
+        await asyncio.to_thread(server.stop)
+    del loop
+    gc.collect()
+    assert handled == []
+    assert "Task was destroyed" not in caplog.text
+    assert "Traceback" not in caplog.text

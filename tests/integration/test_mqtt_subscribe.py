@@ -119,14 +119,17 @@ class Exported:
 
 
 def _f32(value: float) -> float:
-    """A published value as a binary frame carries it: rounded to 6 decimals, then float32."""
+    """A published value as a subscriber reads it from a binary frame: rounded to 6 decimals,
+    carried as float32, read as the shortest decimal of that float32, rounded to 6 decimals."""
     v = float(value)
-    return float(np.float32(round(v, 6) if math.isfinite(v) else v))
+    if not math.isfinite(v):
+        return v
+    return round(float(str(np.float32(round(v, 6)))), 6)
 
 
 def _expected_rows(snap: Any) -> dict[str, float]:
-    """What the record format allows for one poll: resistance per channel (rounded to 6
-    decimals, then float32, as the binary frame carries it), ``inf`` for an open channel,
+    """What the record format allows for one poll: resistance per channel (as a subscriber
+    reads it from the binary frame: ``_f32``), ``inf`` for an open channel,
     nothing for the rest."""
     out: dict[str, float] = {}
     for k, name in enumerate(snap.channel_names):

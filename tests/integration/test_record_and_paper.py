@@ -295,3 +295,33 @@ def test_paper_replay_through_modbus(tmp_path: Path) -> None:
         checks = ((e0, e0_true, sigma_pct[0]), (e1, e1_true, sigma_pct[1]), (mu1, mu1_true, sigma_pct[2]))
         for fitted, true, pct in checks:
             assert abs(math.log(fitted / true)) <= 4 * max(pct, 0.01) / 100, row
+
+
+def test_paper_stopped_by_sigterm_exits_at_once_and_leaves_nothing(tmp_path: Path) -> None:
+    out = tmp_path / "paper"
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    proc = subprocess.Popen(
+        [str(BIN / "tactile-gateway"), "paper", "--out", str(out), "--speed", "10"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        # signal once both recordings are under way (their temporary files exist), not after a sleep
+        deadline = time.monotonic() + 60.0
+        while proc.poll() is None and time.monotonic() < deadline:
+            if out.is_dir() and len(list(out.rglob(".*.csv.*.tmp"))) == 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "paper ended before it was signalled"
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert "Traceback" not in stderr
+    assert stderr.strip() == "paper: stopped by SIGTERM; nothing written", stderr
+    assert not out.exists() or sorted(p.name for p in out.iterdir()) == []

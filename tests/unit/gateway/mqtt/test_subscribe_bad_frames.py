@@ -13,7 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from gateway.cli import main, subscribe_cmd
-from gateway.mqtt.payload import encode_json
+from gateway.mqtt.payload import encode_binary, encode_json
 from gateway.mqtt.subscriber import FrameStream
 
 NAMES = ["a0", "a1"]
@@ -89,3 +89,35 @@ def test_subscribe_records_the_good_frames_around_a_hostile_one(
     rows = [line for line in out.read_text().splitlines() if line and not line.startswith("#")]
     assert rows[0].startswith("time_s,channel,resistance_ohm")
     assert len(rows) == 1 + 2 * len(NAMES)  # the header, and both channels of both good frames
+
+
+def test_subscribe_json_prints_binary_frames_rounded_as_the_published_json(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # float32 values widened to float64 would print as 0.10000000149011612 and 46901.69921875
+    sent = fields(
+        1,
+        force_n=[0.1, 2.123456789],
+        force_static_n=[0.3, None],
+        resistance_ohm=[46901.7, 1234567.8],
+    )
+    meta = json.dumps({"channels": [{"name": n} for n in NAMES], "encoding": "binary"}).encode()
+    messages = [("tactile/gw1/arr/meta", meta), (TOPIC, encode_binary(sent))]
+
+    def fake_run_subscriber(
+        settings: object, on_message: Callable[[str, bytes], None], *args: object, **kwargs: object
+    ) -> None:
+        for topic, payload in messages:
+            on_message(topic, payload)
+
+    monkeypatch.setattr(subscribe_cmd, "run_subscriber", fake_run_subscriber)
+    result = CliRunner().invoke(main, ["subscribe", "--broker", "127.0.0.1", "--json"])
+    assert result.exit_code == 0, result.output
+    line = next(line for line in result.output.splitlines() if line.startswith("{"))
+    printed = json.loads(line)
+    # float32 keeps about 7 significant digits: the shortest decimal of that precision (1234567.8
+    # is the float32 1234567.75), then the published JSON's 6 decimals
+    assert printed["force_n"] == [0.1, 2.123457]
+    assert printed["force_static_n"] == [0.3, None]
+    assert printed["resistance_ohm"] == [46901.7, 1234567.8]
+    assert '"force_n":[0.1,2.123457]' in line and "0000000" not in line
