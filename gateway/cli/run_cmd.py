@@ -93,7 +93,18 @@ def _page(
     if not enabled or not config.metrics.page:
         return None
     current = running if running is not None else [config]
-    return WebPage(FrameHub(holder), device_configs=lambda: [d for b in current[0].buses for d in b.devices])
+
+    def what_is_on(name: str) -> list[str]:
+        try:
+            return device_summary(current[0].find_device(name)[1])
+        except KeyError:  # a device a reload removed
+            return []
+
+    return WebPage(
+        FrameHub(holder),
+        device_configs=lambda: [d for b in current[0].buses for d in b.devices],
+        what_is_on=what_is_on,
+    )
 
 
 async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None, page_on: bool = True) -> int:
@@ -349,7 +360,11 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
                     registry,
                     host,
                     port,
-                    install=WebPage(FrameHub(holder), device_configs=lambda: [device]).install,
+                    install=WebPage(
+                        FrameHub(holder),
+                        device_configs=lambda: [device],
+                        what_is_on=lambda _name: device_summary(device),
+                    ).install,
                 ).start()
             except OSError as exc:
                 click.echo(f"tactile-gateway: cannot serve metrics on {host}:{port}: {exc}", err=True)

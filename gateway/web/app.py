@@ -72,8 +72,12 @@ class WebPage:
         clock: Callable[[], float] = time.monotonic,
         write_timeout_s: float = WRITE_TIMEOUT_S,
         device_configs: Callable[[], Iterable[DeviceDescription]] | None = None,
+        what_is_on: Callable[[str], list[str]] | None = None,
     ) -> None:
         self.hub = hub
+        #: a device's "what is on" lines (values, force, drift correction and its clock,
+        #: parameters, assumptions, writes), as check-config prints them
+        self.what_is_on = what_is_on
         #: the devices' configurations as now in force (a reload changes them), for what the
         #: frames do not carry: disabled channels and the layout's cell area
         self.device_configs = device_configs
@@ -143,6 +147,7 @@ class WebPage:
             up=entry.snapshot.up if entry.seq else None,  # None: no poll of it has completed yet
             seq=entry.seq,
             stream_frames_dropped_total=self.hub.dropped_total.get(name, 0),
+            what_is_on=self.what_is_on(name) if self.what_is_on is not None else [],
         )
         return out
 

@@ -449,6 +449,25 @@ async def test_numbers_appear_on_the_cells_when_toggled(browser: Any) -> None:
     assert errors == [], errors
 
 
+async def test_the_page_says_what_is_on(browser: Any) -> None:
+    """The summary lists what check-config says of the device: its values, how its force is
+    read (here a calibration line on the 14 enabled channels: no drift correction) and that
+    nothing is written to it."""
+    async with steady_page(DEMO_FORCES, disabled=(3, 12)) as server:
+        page, errors = await _open(browser, server.base_url + "/")
+
+        async def listed() -> bool:
+            return len(await page.locator("#what-is-on li").all_text_contents()) > 3
+
+        await until_async(listed, 5, "the what-is-on list")
+        lines = await page.locator("#what-is-on li").all_text_contents()
+        await page.close()
+    assert lines[0] == "values: resistance in ohm, float32, input registers 400+32", lines
+    assert "force: calibration line (static: no drift correction): 14 channels" in lines, lines
+    assert lines[-1] == "writes: none (nothing is ever written to this device)", lines
+    assert errors == [], errors
+
+
 async def test_a_disabled_channel_has_its_own_look_and_legend_entry(browser: Any) -> None:
     async with steady_page(DEMO_FORCES, disabled=(3, 12)) as server:
         dev = await _polled_device(server.base_url)

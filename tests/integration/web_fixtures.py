@@ -26,6 +26,7 @@ from gateway.model.conversion import LineConversion
 from gateway.runtime.poller import Poller, SnapshotHolder
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import GatewaySnapshot
+from gateway.runtime.summary import device_summary
 from gateway.web import FrameHub, WebPage
 from gateway.web.app import WRITE_TIMEOUT_S
 from sim_device import ArrayConfig, SimArray, serve_tcp
@@ -156,7 +157,12 @@ async def steady_page(
     r = np.array([1.0 / (m * f + n) for f in forces])
     proc = DeviceProcessor(device, "sim", 0.05)
     holder = SnapshotHolder()
-    page = WebPage(FrameHub(holder), scale_max_n=scale_max_n, device_configs=lambda: [device])
+    page = WebPage(
+        FrameHub(holder),
+        scale_max_n=scale_max_n,
+        device_configs=lambda: [device],
+        what_is_on=lambda _name: device_summary(device),
+    )
     server = MetricsServer(make_registry(holder.get, CollectorRegistry()), "127.0.0.1", 0, None, page.install)
 
     # one poll: the load does not change, and the page draws the newest frame it is sent

@@ -552,8 +552,20 @@ function route() {
   if (selected) {
     $("dev-name").textContent = selected;
     lastKey = "";
+    showWhatIsOn(devices.get(selected).layout.what_is_on || []);
   }
   dirty = true;
+}
+
+// what the gateway does with the device (values, force, drift correction, writes), as
+// check-config says it
+function showWhatIsOn(lines) {
+  const list = $("what-is-on");
+  list.replaceChildren(...lines.map((line) => {
+    const li = document.createElement("li");
+    li.textContent = line;
+    return li;
+  }));
 }
 
 // the colour key: redrawn when its range, unit or mode changes
