@@ -12,7 +12,7 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from ..modbus.register_map import DeviceClock, RegisterMap
+from ..modbus.register_map import MAX_READ_REGISTERS, DeviceClock, RegisterMap
 from ..model import Divider, FrontEnd, SensorParams
 from ..model.effects import PAPER_EFFECTS
 from .device import parse_device
@@ -102,7 +102,7 @@ def bus_config_for(
     timeout_s: float = 0.5,
     retries: int = 1,
     poll_interval_s: float = 0.1,
-    max_read_registers: int = 125,
+    max_read_registers: int = MAX_READ_REGISTERS,
     backoff_initial_s: float = 0.1,
     backoff_max_s: float = 2.0,
 ) -> BusConfig:

@@ -20,8 +20,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
-from ..modbus.plan import MODBUS_MAX_READ
-from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, ValueFrame
+from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, MAX_READ_REGISTERS, ValueFrame
 from ..model.conversion import CONVERSION_KINDS, Conversion, ConversionError, conversion_from_table
 from ..model.curves import DRIFT_KEYS, CurveError, Drift
 from ..model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
@@ -291,7 +290,7 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
     device_id = table.integer("device_id", REQUIRED, *DEVICE_ID)
     n = table.integer("channels", REQUIRED, 1, MAX_CHANNELS)
     frame_table = table.table("frame", FRAME_KEYS, "[bus.device.frame]")
-    frame = parse_frame(frame_table, n, MODBUS_MAX_READ)
+    frame = parse_frame(frame_table, n, MAX_READ_REGISTERS)
     if frame is None:
         encoding = table.choice("encoding", "adc", ENCODINGS[:2])
     else:

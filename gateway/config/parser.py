@@ -15,7 +15,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
 
-from ..modbus.plan import MODBUS_MAX_READ, read_plan
+from ..modbus.plan import read_plan
+from ..modbus.register_map import MAX_READ_REGISTERS
 from ..model.params import Interval
 from .device import parse_device
 from .mqtt import parse_mqtt
@@ -186,7 +187,7 @@ def parse_bus(
     timeout_s = table.number("timeout_s", 1.0, TIMEOUT_S, " s")
     retries = table.integer("retries", 2, *RETRIES)
     poll_interval_s = table.number("poll_interval_s", 0.1, POLL_INTERVAL_S, " s")
-    max_read_registers = table.integer("max_read_registers", MODBUS_MAX_READ, 1, MODBUS_MAX_READ)
+    max_read_registers = table.integer("max_read_registers", MAX_READ_REGISTERS, 1, MAX_READ_REGISTERS)
     backoff_initial_s = table.number("backoff_initial_s", 0.5, BACKOFF_INITIAL_S, " s")
     backoff_max_s = table.number(
         "backoff_max_s",

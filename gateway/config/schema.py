@@ -15,8 +15,7 @@ from pathlib import Path
 from typing import Final
 
 from ..errors import ConfigError
-from ..modbus.plan import MODBUS_MAX_READ
-from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, DeviceChecks, RegisterMap
+from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, MAX_READ_REGISTERS, DeviceChecks, RegisterMap
 from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
 from ..model.conversion import Conversion, LineConversion, LookupConversion
 from ..model.curves import CurveChannel, Drift
@@ -325,7 +324,7 @@ class BusConfig:
         check_number(where, "timeout_s", self.timeout_s, TIMEOUT_S, " s")
         check_integer(where, "retries", self.retries, *RETRIES)
         check_number(where, "poll_interval_s", self.poll_interval_s, POLL_INTERVAL_S, " s")
-        check_integer(where, "max_read_registers", self.max_read_registers, 1, MODBUS_MAX_READ)
+        check_integer(where, "max_read_registers", self.max_read_registers, 1, MAX_READ_REGISTERS)
         check_number(where, "backoff_initial_s", self.backoff_initial_s, BACKOFF_INITIAL_S, " s")
         check_number(
             where,

@@ -17,7 +17,6 @@ from ..modbus.register_map import (
     IDENTIFICATION_FIELDS,
     MAX_ADDRESS,
     REGISTER_TABLES,
-    STATUS_BITMAP_STRIDE,
     DeviceChecks,
     DeviceClock,
     DeviceWrite,
@@ -26,7 +25,7 @@ from ..modbus.register_map import (
     RegisterMap,
     ValueFrame,
     register_blocks,
-    status_registers,
+    status_span,
 )
 from ..modbus.vendor_fc import VendorRead
 from ..model.params import Interval
@@ -94,7 +93,7 @@ def parse_registers(
 ) -> RegisterMap:
     """``[bus.device.registers]``; with a ``frame`` the channel values come from it, and the
     table may give only the status, reference, temperature and clock addresses."""
-    status_span = 2 * STATUS_BITMAP_STRIDE + status_registers(n)
+    span = status_span(n)
     value_key = "adc_address" if encoding == "adc" else "float_address"
     if frame is not None:
         for key in ("adc_address", "float_address"):
@@ -124,7 +123,7 @@ def parse_registers(
         ),
         word_order=table.choice("word_order", "big", BYTE_ORDERS),
         byte_order=table.choice("byte_order", "big", BYTE_ORDERS),
-        status_address=table.optional_address("status_address", None, MAX_ADDRESS + 1 - status_span),
+        status_address=table.optional_address("status_address", None, MAX_ADDRESS + 1 - span),
         force_reference_address=table.optional_address(
             "force_reference_address", None, MAX_ADDRESS + 1 - 2 * n
         ),

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from ..errors import DecodeError
 from .decode import decode_bitmap, decode_float32, decode_uint16, decode_values, register_value
-from .register_map import STATUS_BITMAP_STRIDE, DeviceLayout, ValueFrame, frame_space
+from .register_map import STATUS_BITMAP_STRIDE, DeviceLayout, ValueFrame, frame_space, status_registers
 
 __all__ = ["ImageBlock", "RawSample", "RegisterImage", "RegisterKind", "decode_sample"]
 
@@ -156,7 +156,7 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
         raise DecodeError(f"unknown encoding {device.encoding!r}")
     bitmaps: list[BoolArray | None] = [None, None, None]
     if regs.status_address is not None:
-        n_regs = -(-n // 16)
+        n_regs = status_registers(n)
         for k in range(3):
             words = image.get(table, regs.status_address + k * STATUS_BITMAP_STRIDE, n_regs)
             if words is not None:

@@ -1,7 +1,7 @@
 """The read plan: the Modbus requests one poll of a device makes.
 
 ``read_plan`` coalesces the register blocks of ``register_map.register_blocks`` into the
-fewest requests a bus allows (at most ``MODBUS_MAX_READ`` registers each, never splitting a
+fewest requests a bus allows (at most ``register_map.MAX_READ_REGISTERS`` each, never splitting a
 float32); ``device_plan`` adds the device clock when the register map names one.
 ``block_registers`` reassembles a block from the answers.
 """
@@ -12,13 +12,12 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
-from .register_map import DeviceClock, DeviceLayout, RegisterBlock, register_blocks
+from .register_map import MAX_READ_REGISTERS, DeviceClock, DeviceLayout, RegisterBlock, register_blocks
 from .vendor_fc import VendorRead
 
 __all__ = [
     "MAX_GAP_REGISTERS",
     "MERGE_GAP",
-    "MODBUS_MAX_READ",
     "ReadRequest",
     "block_registers",
     "device_plan",
@@ -28,8 +27,6 @@ __all__ = [
 
 #: Two register ranges at most this many registers apart are read in one request.
 MAX_GAP_REGISTERS: Final = 8
-#: Modbus allows at most 125 registers in one read (function codes 3 and 4).
-MODBUS_MAX_READ: Final = 125
 
 
 @dataclass(frozen=True)
@@ -71,8 +68,8 @@ def read_plan(
     ``max_read_registers``, and a float32 value is never split across two requests. Raises
     ``ValueError`` if ``max_read_registers`` cannot hold one value.
     """
-    if not 1 <= max_read_registers <= MODBUS_MAX_READ:
-        raise ValueError(f"max_read_registers = {max_read_registers} is outside 1..{MODBUS_MAX_READ}")
+    if not 1 <= max_read_registers <= MAX_READ_REGISTERS:
+        raise ValueError(f"max_read_registers = {max_read_registers} is outside 1..{MAX_READ_REGISTERS}")
     if max_gap < 0:
         raise ValueError(f"max_gap = {max_gap} must be >= 0")
     blocks = register_blocks(device, clock=False)
@@ -80,7 +77,7 @@ def read_plan(
     if widest > max_read_registers:
         raise ValueError(
             f"max_read_registers = {max_read_registers} cannot hold a float32 value (2 registers, "
-            f"never split across reads); allowed: 2..{MODBUS_MAX_READ}"
+            f"never split across reads); allowed: 2..{MAX_READ_REGISTERS}"
         )
     requests: list[ReadRequest] = []
     for kind in ("holding", "input"):

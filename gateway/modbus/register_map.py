@@ -39,6 +39,8 @@ __all__ = [
     "FRAME_QUANTITIES",
     "IDENTIFICATION_FIELDS",
     "MAX_ADDRESS",
+    "MAX_READ_REGISTERS",
+    "MAX_WRITE_REGISTERS",
     "REGISTER_TABLES",
     "STATUS_BITMAPS",
     "STATUS_BITMAP_STRIDE",
@@ -54,6 +56,7 @@ __all__ = [
     "frame_space",
     "register_blocks",
     "status_registers",
+    "status_span",
 ]
 
 #: How a device reports each channel: ``adc`` counts of a divider, ``float32`` ohm, or its
@@ -67,6 +70,10 @@ STATUS_BITMAP_STRIDE: Final = 16
 STATUS_BITMAPS: Final = ("open", "short", "saturated")
 #: The highest Modbus register address.
 MAX_ADDRESS: Final = 65535
+#: Most registers one read may ask for (Modbus application protocol, functions 3 and 4).
+MAX_READ_REGISTERS: Final = 125
+#: Most registers one write may carry (function 16).
+MAX_WRITE_REGISTERS: Final = 123
 #: The simulator's device clock (input registers 2-5, uint64 ms; docs/register-map.md).
 DEVICE_TIME_ADDRESS: Final = 2
 DEVICE_TIME_REGISTERS: Final = 4
@@ -397,7 +404,13 @@ class RegisterBlock:
 
 
 def status_registers(n_channels: int) -> int:
+    """Registers of one status bitmap: one bit per channel, 16 per register."""
     return (n_channels + 15) // 16
+
+
+def status_span(n_channels: int) -> int:
+    """Registers from the first status bitmap to the end of the third."""
+    return 2 * STATUS_BITMAP_STRIDE + status_registers(n_channels)
 
 
 def register_blocks(device: DeviceLayout, clock: bool = True) -> tuple[RegisterBlock, ...]:

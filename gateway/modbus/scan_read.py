@@ -18,8 +18,9 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from ..errors import DeviceError, DeviceExceptionResponse, DeviceTimeoutError
+from .register_map import MAX_READ_REGISTERS
 from .scan import Snapshot
-from .transport import MAX_READ_COUNT, Transport
+from .transport import Transport
 
 __all__ = ["ScanRun", "TableReader", "scan_device"]
 
@@ -34,11 +35,11 @@ Range = tuple[int, int]
 
 
 def _chunks(ranges: Sequence[Range]) -> list[tuple[int, int]]:
-    """(start, count) reads of at most ``MAX_READ_COUNT`` registers covering ``ranges``."""
+    """(start, count) reads of at most ``MAX_READ_REGISTERS`` registers covering ``ranges``."""
     out: list[tuple[int, int]] = []
     for lo, hi in ranges:
-        for start in range(lo, hi + 1, MAX_READ_COUNT):
-            out.append((start, min(MAX_READ_COUNT, hi + 1 - start)))
+        for start in range(lo, hi + 1, MAX_READ_REGISTERS):
+            out.append((start, min(MAX_READ_REGISTERS, hi + 1 - start)))
     return out
 
 

@@ -47,14 +47,12 @@ from ..errors import (
     GatewayError,
     WriteNotAllowedError,
 )
+from .plan import ReadRequest
+from .register_map import MAX_READ_REGISTERS, MAX_WRITE_REGISTERS
 from .vendor_fc import VendorRead
 
 log = logging.getLogger(__name__)
 
-#: Most registers one read may ask for (Modbus application protocol, function 3/4).
-MAX_READ_COUNT = 125
-#: Most registers one write may carry (function 16).
-MAX_WRITE_COUNT = 123
 
 EXCEPTION_NAMES: dict[int, str] = {
     1: "illegal function",
@@ -174,6 +172,18 @@ class Transport(abc.ABC):
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
 
+    async def read(self, device_id: int, request: ReadRequest) -> list[int]:
+        """One request of a poll's read plan (``plan.ReadRequest``), the 16-bit words it
+        answers: function 4 or 3, a vendor-defined read, or a read behind a row select (the
+        row's number is written to the select register first, function 6: a write the
+        configuration names)."""
+        if request.vendor is not None:
+            return await self.read_vendor(device_id, request.vendor, request.address, request.count)
+        if request.select is not None:
+            select_address, row = request.select
+            await self.write_register(device_id, select_address, row, allow_write=True)
+        return await self._read_registers(request.table, device_id, request.address, request.count)
+
     async def read_input_registers(self, device_id: int, address: int, count: int) -> list[int]:
         """Function 4: ``count`` input registers from ``address`` (values 0..65535)."""
         return await self._read_registers("input", device_id, address, count)
@@ -183,8 +193,8 @@ class Transport(abc.ABC):
         return await self._read_registers("holding", device_id, address, count)
 
     async def _read_registers(self, kind: str, device_id: int, address: int, count: int) -> list[int]:
-        if not (1 <= count <= MAX_READ_COUNT and address >= 0 and address + count <= 0x10000):
-            check_range(address, count, MAX_READ_COUNT)
+        if not (1 <= count <= MAX_READ_REGISTERS and address >= 0 and address + count <= 0x10000):
+            check_range(address, count, MAX_READ_REGISTERS)
         if not 0 <= device_id <= 247:
             self._check_device_id(device_id)
         what = f"read {kind} {address}+{count} of device {device_id} on {self.name!r}"
@@ -256,7 +266,7 @@ class Transport(abc.ABC):
                 "the device configuration does not set allow_write = true"
             )
         regs = [int(v) for v in values]
-        check_range(address, len(regs), MAX_WRITE_COUNT)
+        check_range(address, len(regs), MAX_WRITE_REGISTERS)
         if any(not 0 <= v <= 0xFFFF for v in regs):
             raise GatewayError("register values must be in 0..65535")
         self._check_device_id(device_id)

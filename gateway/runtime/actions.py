@@ -12,7 +12,7 @@ from ..modbus.client import ModbusTransport
 from ..modbus.register_map import DeviceWrite
 from ..modbus.transport import Transport
 from .identity import verify_device
-from .requests import run_writes
+from .writes import run_writes
 
 __all__ = ["action_writes", "run_action"]
 

@@ -51,12 +51,12 @@ from ..errors import (
 from ..modbus.client import ModbusTransport
 from ..modbus.image import RegisterKind
 from ..modbus.plan import MERGE_GAP, ReadRequest, device_plan
+from ..modbus.register_map import MAX_READ_REGISTERS
 from ..modbus.transport import Transport
 from .conversion import Conversion
 from .counters import DeviceCounters, Tally
 from .identity import needs_preparing, prepare_device
 from .processor import ClockHealth, DeviceProcessor, DeviceState
-from .requests import read_request
 from .snapshot import DeviceSnapshot
 
 log = logging.getLogger(__name__)
@@ -86,7 +86,7 @@ class DeviceRunner:
     processor: DeviceProcessor
     plan: tuple[ReadRequest, ...]  # what one poll reads (see ``device_plan``)
     state: DeviceState
-    max_read_registers: int = 125
+    max_read_registers: int = MAX_READ_REGISTERS
     merge_gap: int = MERGE_GAP  # 0 once the device refused a merged read
     clock: bool = True  # False once the device refused the clock registers
     verified: bool = False  # the device's checks passed on this connection
@@ -149,7 +149,7 @@ class BusWorker:
         for attempt in range(attempts):
             runner.tally.read()
             try:
-                return await read_request(self.transport, dev.device_id, req)
+                return await self.transport.read(dev.device_id, req)
             except DeviceError as exc:
                 runner.tally.error(error_reason(exc))
                 last = exc

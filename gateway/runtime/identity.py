@@ -15,7 +15,7 @@ from typing import Final
 from ..config import DeviceConfig
 from ..errors import DeviceMismatchError
 from ..modbus.transport import Transport
-from .requests import run_writes
+from .writes import run_writes
 
 __all__ = ["IDENTIFICATION_OBJECTS", "needs_preparing", "prepare_device", "verify_device"]
 

@@ -17,7 +17,6 @@ from ..modbus.image import RawSample, RegisterImage, RegisterKind, decode_sample
 from ..modbus.plan import MERGE_GAP, device_plan
 from ..modbus.transport import Transport
 from .identity import prepare_device
-from .requests import read_request
 
 __all__ = ["sample_device"]
 
@@ -41,7 +40,7 @@ async def sample_device(
         while True:
             reads: list[tuple[RegisterKind, int, list[int]]] = []
             for req in plan:
-                reads.append((req.kind, req.address, await read_request(transport, device.device_id, req)))
+                reads.append((req.kind, req.address, await transport.read(device.device_id, req)))
             now = time.monotonic()
             samples.append((now, decode_sample(device, RegisterImage.from_reads(reads))))
             if now - start >= duration_s:
