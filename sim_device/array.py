@@ -41,51 +41,26 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .batch import SampleBatch as SampleBatch
 from .config import ArrayConfig, check_electronics
 from .faults import CHANNEL_MODES, FaultInjector
-from .maps import DeviceMap, make_map
+from .map_factory import make_map
+from .maps import DeviceMap
 from .registers import Electronics
 from .scenarios import Scenario
 from .sensor import PaperSensor, SimSensorParams
 from .world import World
 
 FloatArray = NDArray[np.float64]
-Listener = Callable[["SampleBatch"], None]
+Listener = Callable[[SampleBatch], None]
 
 #: Bound on samples x channels simulated per catch-up (see the module docstring).
 MAX_WORK = 400_000
-
-
-@dataclass(frozen=True)
-class SampleBatch:
-    """Consecutive ADC conversions of one array; arrays are (T,) or (T, N)."""
-
-    device_id: int
-    time_s: FloatArray
-    adc_counts: NDArray[np.int64]
-    resistance_ohm: FloatArray  # measured, from the counts by eq. 18
-    true_resistance_ohm: FloatArray  # before the ADC, no noise
-    force_n: FloatArray
-    temperature_c: FloatArray
-    modes: NDArray[np.int8]
-
-    def last(self) -> SampleBatch:
-        """A batch holding only the last sample."""
-        return SampleBatch(
-            self.device_id,
-            self.time_s[-1:],
-            self.adc_counts[-1:],
-            self.resistance_ohm[-1:],
-            self.true_resistance_ohm[-1:],
-            self.force_n[-1:],
-            self.temperature_c[-1:],
-            self.modes[-1:],
-        )
 
 
 class SimArray:

@@ -1,9 +1,9 @@
 """The built-in scenarios (``tactile-sim --scenario NAME``; listed in ``docs/scenarios.md``).
 
-Each is a factory of a ``Scenario`` for a layout: holds, staircases, the paper's creep tests
-(2, 4, 6, 8 N), ramps, sines, load cycles, a probe indenting tissue with a hard inclusion,
-a temperature step, and the discrepancy protocol. Forces in N, times in s, temperatures in
-degC.
+Each is a factory of a ``ScenarioSpec`` for a layout (``Scenario.builtin`` binds it): holds,
+staircases, the paper's creep tests (2, 4, 6, 8 N), ramps, sines, load cycles, a probe
+indenting tissue with a hard inclusion, a temperature step, and the discrepancy protocol.
+Forces in N, times in s, temperatures in degC.
 """
 
 from __future__ import annotations
@@ -13,28 +13,28 @@ from collections.abc import Callable
 import numpy as np
 
 from .profiles import ProfileBuilder
-from .scenarios import ArrayLayout, Indentation, Scenario, TemperatureProgram, UniformLoad
+from .scenario_parts import ArrayLayout, Indentation, ScenarioSpec, TemperatureProgram, UniformLoad
 
-_Factory = Callable[[ArrayLayout, str, str], Scenario]
+_Factory = Callable[[ArrayLayout, str, str], ScenarioSpec]
 
 
 def _uniform(builder: ProfileBuilder, repeat: bool = False) -> UniformLoad:
     return UniformLoad(builder.build(repeat=repeat))
 
 
-def _idle(layout: ArrayLayout, name: str, desc: str) -> Scenario:
-    return Scenario(name, layout, description=desc)
+def _idle(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
+    return ScenarioSpec(name, description=desc)
 
 
-def _holds(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def _holds(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     b = ProfileBuilder(0.0).hold(10.0)
     for level in (0.5, 2.0, 5.0):
         b.hold(120.0, level)
     b.hold(60.0, 0.0)
-    return Scenario(name, layout, loads=[_uniform(b)], description=desc)
+    return ScenarioSpec(name, loads=[_uniform(b)], description=desc)
 
 
-def _staircase(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def _staircase(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     b = ProfileBuilder(0.0).hold(10.0)
     levels = [0.5 * k for k in range(1, 11)]
     for level in levels:
@@ -42,38 +42,38 @@ def _staircase(layout: ArrayLayout, name: str, desc: str) -> Scenario:
     for level in reversed(levels[:-1]):
         b.hold(30.0, level)
     b.hold(30.0, 0.0)
-    return Scenario(name, layout, loads=[_uniform(b)], description=desc)
+    return ScenarioSpec(name, loads=[_uniform(b)], description=desc)
 
 
-def _creep_test(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def _creep_test(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     # 600 s unloaded before the first hold too: a logger started after the device still sees
     # the unloaded sensor before the first step, so every step's onset lies between two samples
     b = ProfileBuilder(0.0).hold(600.0)
     for level in (2.0, 4.0, 6.0, 8.0):
         b.hold(600.0, level).hold(600.0, 0.0)
-    return Scenario(name, layout, loads=[_uniform(b)], description=desc)
+    return ScenarioSpec(name, loads=[_uniform(b)], description=desc)
 
 
-def _ramps(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def _ramps(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     b = ProfileBuilder(0.0).hold(5.0)
     for rate in (0.1, 0.5, 2.0):
         b.ramp(5.0, rate_per_s=rate).ramp(0.0, rate_per_s=rate).hold(20.0)
-    return Scenario(name, layout, loads=[_uniform(b)], description=desc)
+    return ScenarioSpec(name, loads=[_uniform(b)], description=desc)
 
 
-def _sine(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def _sine(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     b = ProfileBuilder(0.0).ramp(2.0, duration_s=2.0).sine(1.5, 10.0, cycles=30).ramp(0.0, duration_s=2.0)
-    return Scenario(name, layout, loads=[_uniform(b)], description=desc, repeat=True)
+    return ScenarioSpec(name, loads=[_uniform(b)], description=desc, repeat=True)
 
 
-def _cycles(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def _cycles(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     b = ProfileBuilder(0.0)
     for _ in range(10):
         b.ramp(4.0, rate_per_s=1.0).hold(5.0).ramp(0.0, rate_per_s=1.0).hold(5.0)
-    return Scenario(name, layout, loads=[_uniform(b)], description=desc, repeat=True)
+    return ScenarioSpec(name, loads=[_uniform(b)], description=desc, repeat=True)
 
 
-def builtin_indentation(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def builtin_indentation(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     cx, cy = layout.centre_mm
     p = layout.pitch_mm
     width = (layout.columns - 1) * p
@@ -90,23 +90,22 @@ def builtin_indentation(layout: ArrayLayout, name: str, desc: str) -> Scenario:
         rest_s=2.0,
         cell_area_mm2=p * p,
     )
-    return Scenario(name, layout, loads=[probe], description=desc, repeat=True)
+    return ScenarioSpec(name, loads=[probe], description=desc, repeat=True)
 
 
-def _temperature_step(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def _temperature_step(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     load = ProfileBuilder(0.0).hold(5.0).hold(1500.0, 2.0).hold(60.0, 0.0)
     temp = ProfileBuilder(25.0).hold(605.0).ramp(35.0, rate_per_s=0.5).hold(400.0).ramp(25.0, rate_per_s=0.5)
     temp.hold(120.0)
-    return Scenario(
+    return ScenarioSpec(
         name,
-        layout,
         loads=[_uniform(load)],
         temperatures=[TemperatureProgram(temp.build())],
         description=desc,
     )
 
 
-def _discrepancy(layout: ArrayLayout, name: str, desc: str) -> Scenario:
+def _discrepancy(layout: ArrayLayout, name: str, desc: str) -> ScenarioSpec:
     b = ProfileBuilder(0.0).hold(10.0)
     # log-spaced static levels, each held then unloaded and held at zero (creep and recovery)
     for level in np.geomspace(0.2, 8.0, 7):
@@ -125,9 +124,8 @@ def _discrepancy(layout: ArrayLayout, name: str, desc: str) -> Scenario:
     b.hold(1200.0, 2.0).hold(60.0, 0.0)
     temp = ProfileBuilder(25.0).hold(t_step).ramp(35.0, rate_per_s=0.5).hold(500.0).ramp(25.0, rate_per_s=0.5)
     temp.hold(max(0.0, b.time_s - temp.time_s))
-    return Scenario(
+    return ScenarioSpec(
         name,
-        layout,
         loads=[_uniform(b)],
         temperatures=[TemperatureProgram(temp.build())],
         description=desc,

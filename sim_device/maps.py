@@ -14,6 +14,9 @@ Maps (``ArrayConfig.register_map``):
   ``sim_device.registers``; high-side divider (eq. 18);
 - ``"rawgrid"`` (``sim_device.rawgrid.RawgridMap``): ``docs/register-map-rawgrid.md``.
 
+``sim_device.map_factory.make_map`` picks one for an ``ArrayConfig``: it sits above this module
+and ``rawgrid`` (which builds on it), so the imports point one way.
+
 Vendor-protocol devices (``VENDOR_MAPS``) are not register maps of a ``SimArray``: they wrap
 an array of the default map and answer on the bus themselves (their own function codes):
 
@@ -32,19 +35,17 @@ import importlib.metadata
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from . import registers as reg
+from .batch import SampleBatch
 from .config import ArrayConfig
 from .electronics import adc_counts, full_scale, resistance_from_counts
 from .faults import CHANNEL_MODES
 from .registers import Electronics, HoldingWrite
-
-if TYPE_CHECKING:
-    from .array import SampleBatch
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -236,13 +237,3 @@ class TactileSimMap(DeviceMap):
             "ProductName": PRODUCT_NAME,
             "ModelName": f"Linqstat {self.rows}x{self.columns}",
         }
-
-
-def make_map(config: ArrayConfig) -> DeviceMap:
-    """The map ``config.register_map`` names, for that array."""
-    from .rawgrid import RawgridMap
-
-    pitch_um = round(config.pitch_mm * 1000.0)
-    if config.register_map == RawgridMap.name:
-        return RawgridMap(config.channels, config.columns, pitch_um, config.board_leakage_ohm)
-    return TactileSimMap(config.channels, config.columns, pitch_um)

@@ -20,19 +20,15 @@ Read-out: a low-side divider (``sim_device.electronics.LowSideDivider``): pull-u
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import NDArray
 
+from .batch import SampleBatch
 from .config import RAWGRID_BOARD, ArrayConfig
 from .electronics import LowSideDivider, full_scale
 from .faults import CHANNEL_MODES
 from .maps import Block, DeviceMap, FloatArray, IntArray
 from .registers import Electronics
-
-if TYPE_CHECKING:
-    from .array import SampleBatch
 
 IR_PRODUCT_ID = 0
 IR_FIRMWARE_VERSION = 1

@@ -1,7 +1,8 @@
 """Scenario files: a TOML description of loads, temperatures and faults into a ``Scenario``.
 
 The format is documented in ``docs/scenarios.md`` and in ``sim_device.scenarios``; every error
-is a ``ScenarioError`` naming the source and the key.
+is a ``ScenarioError`` naming the source and the key. ``parse_scenario`` returns a
+``ScenarioSpec``; ``Scenario.from_toml`` (above this module) binds it to the layout.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Any
 
 from .builtin_scenarios import builtin_indentation
 from .profiles import ProfileBuilder, ScenarioError
-from .scenarios import (
+from .scenario_parts import (
     DEFAULT_TEMPERATURE_C,
     FORCE_RANGE_N,
     TEMPERATURE_RANGE_C,
@@ -23,7 +24,7 @@ from .scenarios import (
     FaultEvent,
     ForceSource,
     Indentation,
-    Scenario,
+    ScenarioSpec,
     TemperatureProgram,
     UniformLoad,
 )
@@ -56,6 +57,7 @@ class _Ctx:
 
 
 def _unknown_keys(table: Mapping[str, Any], allowed: Sequence[str], ctx: _Ctx, prefix: str) -> None:
+    # the simulator's own copy of ``gateway.keys.check_keys``: sim_device never imports gateway
     for key in table:
         if key not in allowed:
             close = difflib.get_close_matches(key, list(allowed), n=1)
@@ -183,7 +185,10 @@ def _parse_steps(
     return builder
 
 
-def parse_scenario(data: Mapping[str, Any], layout: ArrayLayout, source: str, default_name: str) -> Scenario:
+def parse_scenario(
+    data: Mapping[str, Any], layout: ArrayLayout, source: str, default_name: str
+) -> ScenarioSpec:
+    """The scenario a parsed TOML table describes, for ``layout`` (``Scenario.from_toml`` binds it)."""
     ctx = _Ctx(source)
     _unknown_keys(data, _TOP_KEYS, ctx, "")
     name = data.get("name", default_name)
@@ -259,9 +264,8 @@ def parse_scenario(data: Mapping[str, Any], layout: ArrayLayout, source: str, de
         builder = _parse_steps(table, ctx, where, "c", initial, TEMPERATURE_RANGE_C)
         temps.append(TemperatureProgram(builder.build(), chans))
     faults = [_parse_fault(t, ctx, f"fault[{k}]", n) for k, t in enumerate(_table_list(data, "fault", ctx))]
-    return Scenario(
+    return ScenarioSpec(
         name,
-        layout,
         loads=loads,
         temperatures=temps,
         description=description,

@@ -1,4 +1,5 @@
-"""What a fit minimises, and the reference-force zero offset (used by ``fitting``).
+"""What a fit minimises, and the reference-force zero offset (used by ``fitting``; both
+read the record through ``fit_data.FitData``, below them).
 
 Two objectives:
 
@@ -30,15 +31,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..model import SensorModel, SensorParams
-
-if TYPE_CHECKING:
-    from .fitting import FitData
+from .fit_data import FitData
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

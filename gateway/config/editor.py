@@ -25,6 +25,7 @@ from tomlkit.items import AoT, Array, InlineTable, Item, Table
 
 from ..atomic import atomic_write_text
 from ..errors import ConfigError
+from ..keys import check_keys
 from ..model import UnknownEffectError, parameter_names, parse_effects
 from .parser import parse_config
 from .schema import BusConfig, ChannelConfig, DeviceConfig, GatewayConfig
@@ -46,6 +47,8 @@ __all__ = [
 
 #: Channel keys set directly (the rest are sensor parameters, set in ``params``).
 PLAIN_KEYS = ("name", "x_mm", "y_mm", "enabled", "effects")
+#: ``check_keys``'s message for ``channels set``: it lists the plain keys only
+_UNKNOWN_KEY = "unknown key {key}{hint} (allowed: {allowed}, or a sensor parameter such as r0_ohm)"
 _TRUE = ("true", "yes", "on", "1")
 _FALSE = ("false", "no", "off", "0")
 
@@ -164,13 +167,7 @@ def parse_assignment(pair: str) -> Assignment:
     if not sep or not key:
         raise ConfigError(f"{pair!r} is not KEY=VALUE")
     allowed = [*PLAIN_KEYS, *parameter_names()]
-    if key not in allowed:
-        close = difflib.get_close_matches(key, allowed, n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise ConfigError(
-            f"unknown key {key!r}{hint} "
-            f"(allowed: {', '.join(PLAIN_KEYS)}, or a sensor parameter such as r0_ohm)"
-        )
+    check_keys([key], allowed, lambda _key, message: ConfigError(message), _UNKNOWN_KEY, shown=PLAIN_KEYS)
     if key == "name":
         return Assignment(key, tomlkit.item(text.strip()), text.strip())
     if key == "enabled":

@@ -6,17 +6,17 @@ allowed range or values; an unknown key gets a "did you mean" suggestion.
 
 from __future__ import annotations
 
-import difflib
 import json
 import os
 import re
 import stat
 import tomllib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
+from ..keys import check_keys, suggest
 from ..model.params import Interval
 
 __all__ = [
@@ -103,11 +103,6 @@ def join_key(path: str, key: str) -> str:
     return f"{path}.{shown}" if path else shown
 
 
-def suggest(word: str, choices: Iterable[str], cutoff: float = 0.6) -> str:
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=cutoff)
-    return f"; did you mean {close[0]!r}?" if close else ""
-
-
 class Context:
     """What every message needs: the file, and the directory relative paths start from."""
 
@@ -132,12 +127,7 @@ class Table:
         self.ctx = ctx
         self.data = data
         self.path = path
-        for key in data:
-            if key not in allowed:
-                raise ctx.error(
-                    join_key(path, key),
-                    f"unknown key{suggest(key, allowed)} (allowed keys: {', '.join(allowed)})",
-                )
+        check_keys(data, allowed, lambda key, message: ctx.error(join_key(path, key), message))
 
     def at(self, key: str) -> str:
         return join_key(self.path, key)

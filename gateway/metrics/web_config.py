@@ -42,6 +42,7 @@ import bcrypt
 import yaml
 
 from ..errors import ConfigError
+from ..keys import check_keys
 
 _CLIENT_AUTH = {
     "NoClientCert": ssl.CERT_NONE,
@@ -114,12 +115,12 @@ def _web_error(path: Path, key: str, message: str) -> ConfigError:
 
 
 def _check_keys(path: Path, where: str, table: Mapping[str, Any], allowed: Iterable[str]) -> None:
-    allowed = tuple(allowed)
-    for key in table:
-        if key not in allowed:
-            raise _web_error(
-                path, f"{where}.{key}" if where else str(key), f"unknown key; allowed: {', '.join(allowed)}"
-            )
+    check_keys(
+        table,
+        tuple(allowed),
+        lambda key, message: _web_error(path, f"{where}.{key}" if where else str(key), message),
+        "unknown key; allowed: {allowed}",
+    )
 
 
 def _check_private_key(path: Path, key: Path) -> None:

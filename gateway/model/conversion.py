@@ -188,6 +188,7 @@ def conversion_from_table(
     if kind == "curve":
         return curve_from_table(data)
     allowed = _LINE_KEYS if kind == "line" else _LOOKUP_KEYS
+    # the model imports nothing of ours, so not ``gateway.keys.check_keys``: the error names the key
     for key in data:
         if key not in allowed:
             raise ConversionError(key, f"unknown key; allowed: {', '.join(allowed)}")

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .physics import polymer_resistance_ohm
-from .submodels import Contact, Leakage, SeriesResistance, Tunneling
+from .submodels import ParallelPath, SeriesTerm, Tunneling
 
 FloatArray = NDArray[np.float64]
 
@@ -68,7 +68,7 @@ class ResistanceEvaluator:
     resistance-shaping submodels (contact, series resistance, leakage; on or off)."""
 
     def __init__(
-        self, tunneling: Tunneling, contact: Contact, series: SeriesResistance, leakage: Leakage
+        self, tunneling: Tunneling, contact: SeriesTerm, series: SeriesTerm, leakage: ParallelPath
     ) -> None:
         self.r0_ohm = tunneling.params.r0_ohm
         self.gamma_s0 = tunneling.gamma_s0

@@ -24,7 +24,7 @@ from .evaluator import ResistanceBreakdown, ResistanceEvaluator
 from .inversion import INVALID, Inversion, Inverter, hold_invalid
 from .params import ChannelParams, SensorParams
 from .state import ModelState
-from .submodels import Contact, Factor, Leakage, SeriesResistance, StrainState, Submodel, Tunneling
+from .submodels import Factor, ParallelPath, SeriesTerm, StrainState, Submodel, Tunneling
 
 FloatArray = NDArray[np.float64]
 
@@ -45,8 +45,8 @@ class SensorModel:
             self.submodels[name] = form(self.params)
         sub = self.submodels
         assert isinstance(sub["tunneling"], Tunneling)
-        assert isinstance(sub["contact"], Contact) and isinstance(sub["leakage"], Leakage)
-        assert isinstance(sub["series_resistance"], SeriesResistance)
+        assert isinstance(sub["contact"], SeriesTerm) and isinstance(sub["leakage"], ParallelPath)
+        assert isinstance(sub["series_resistance"], SeriesTerm)
         assert isinstance(sub["temperature"], Factor)
         self.tunneling = sub["tunneling"]
         self.temperature: Factor = sub["temperature"]

@@ -3,8 +3,11 @@
 Every effect of ``docs/record-format.md`` is a module here with two classes: the effect and
 its null variant (``No...``), which adds nothing (zero resistance, zero strain, an infinite
 parallel path, a unit factor), so switching an effect off reduces the model exactly to the
-model without it. ``gateway.model.effects.EFFECTS`` is the table of both forms; adding an
-effect is one new module and one row there.
+model without it. The two are siblings, as PyBaMM's ``no_convection`` is of its full model:
+both subclass the effect's kind below (``SeriesTerm``, ``ParallelPath``, ``Factor``,
+``StrainState``), whose defaults are the null behaviour; the null variant never subclasses
+the effect only to override its methods back. ``gateway.model.effects.EFFECTS`` is the
+table of both forms; adding an effect is one new module and one row there.
 
 Kinds of effect, by what they change (SI units, arrays over N channels):
 

@@ -26,9 +26,14 @@ class Contact(SeriesTerm):
         )
 
 
-class NoContact(Contact):
+class NoContact(SeriesTerm):
+    """``contact`` switched off: a series term of 0 ohm (a sibling of ``Contact``)."""
+
+    effect: ClassVar[str] = Contact.effect
     active: ClassVar[bool] = False
+    description: ClassVar[str] = Contact.description
+    parameters: ClassVar[tuple[str, ...]] = Contact.parameters
 
     def __init__(self, params: ChannelParams) -> None:
-        SeriesTerm.__init__(self, params)
+        super().__init__(params)
         self.coefficient = zeros_like(params)

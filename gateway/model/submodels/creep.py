@@ -54,20 +54,12 @@ class Creep(StrainState):
         return kelvin_held_strain(force_n, time_s, p.area_m2, e1, mu1)
 
 
-class NoCreep(Creep):
+class NoCreep(StrainState):
+    """``creep`` switched off: ``StrainState``'s defaults, no strain and no state (a sibling
+    of ``Creep``)."""
+
+    effect: ClassVar[str] = Creep.effect
     active: ClassVar[bool] = False
-    fields: ClassVar[tuple[str, ...]] = ()
-
-    def strain(self, state: ModelState) -> FloatArray | None:
-        return None
-
-    def relax(self, state: ModelState, held_n: FloatArray, dt_s: ArrayLike) -> StateChanges:
-        return {}
-
-    def series(
-        self, force_n: FloatArray, held_n: FloatArray, dt_s: FloatArray, state0: ModelState
-    ) -> tuple[FloatArray | None, StateChanges]:
-        return None, {}
-
-    def held_step(self, force_n: FloatArray, time_s: FloatArray) -> FloatArray | None:
-        return None
+    description: ClassVar[str] = Creep.description
+    parameters: ClassVar[tuple[str, ...]] = Creep.parameters
+    term: ClassVar[str] = Creep.term

@@ -46,20 +46,12 @@ class Creep2(StrainState):
         return kelvin_held_strain(force_n, time_s, p.area_m2, p.e2_pa, p.mu2_pa_s)
 
 
-class NoCreep2(Creep2):
+class NoCreep2(StrainState):
+    """``creep2`` switched off: ``StrainState``'s defaults, no strain and no state (a sibling
+    of ``Creep2``)."""
+
+    effect: ClassVar[str] = Creep2.effect
     active: ClassVar[bool] = False
-    fields: ClassVar[tuple[str, ...]] = ()
-
-    def strain(self, state: ModelState) -> FloatArray | None:
-        return None
-
-    def relax(self, state: ModelState, held_n: FloatArray, dt_s: ArrayLike) -> StateChanges:
-        return {}
-
-    def series(
-        self, force_n: FloatArray, held_n: FloatArray, dt_s: FloatArray, state0: ModelState
-    ) -> tuple[FloatArray | None, StateChanges]:
-        return None, {}
-
-    def held_step(self, force_n: FloatArray, time_s: FloatArray) -> FloatArray | None:
-        return None
+    description: ClassVar[str] = Creep2.description
+    parameters: ClassVar[tuple[str, ...]] = Creep2.parameters
+    term: ClassVar[str] = Creep2.term

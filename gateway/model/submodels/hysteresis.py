@@ -60,20 +60,12 @@ class Hysteresis(StrainState):
         return np.asarray(-p.hysteresis_strain * direction)
 
 
-class NoHysteresis(Hysteresis):
+class NoHysteresis(StrainState):
+    """``hysteresis`` switched off: ``StrainState``'s defaults, no strain and no state (a sibling
+    of ``Hysteresis``)."""
+
+    effect: ClassVar[str] = Hysteresis.effect
     active: ClassVar[bool] = False
-    fields: ClassVar[tuple[str, ...]] = ()
-
-    def strain(self, state: ModelState) -> FloatArray | None:
-        return None
-
-    def record(self, state: ModelState, force_n: FloatArray) -> StateChanges:
-        return {}
-
-    def series(
-        self, force_n: FloatArray, held_n: FloatArray, dt_s: FloatArray, state0: ModelState
-    ) -> tuple[FloatArray | None, StateChanges]:
-        return None, {}
-
-    def held_step(self, force_n: FloatArray, time_s: FloatArray) -> FloatArray | None:
-        return None
+    description: ClassVar[str] = Hysteresis.description
+    parameters: ClassVar[tuple[str, ...]] = Hysteresis.parameters
+    term: ClassVar[str] = Hysteresis.term

@@ -25,9 +25,14 @@ class Leakage(ParallelPath):
         self.ohm = params.leakage_resistance_ohm
 
 
-class NoLeakage(Leakage):
+class NoLeakage(ParallelPath):
+    """``leakage`` switched off: an infinite parallel path (a sibling of ``Leakage``)."""
+
+    effect: ClassVar[str] = Leakage.effect
     active: ClassVar[bool] = False
+    description: ClassVar[str] = Leakage.description
+    parameters: ClassVar[tuple[str, ...]] = Leakage.parameters
 
     def __init__(self, params: ChannelParams) -> None:
-        ParallelPath.__init__(self, params)
+        super().__init__(params)
         self.ohm = np.full_like(params.r0_ohm, np.inf)

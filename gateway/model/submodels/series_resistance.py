@@ -22,9 +22,14 @@ class SeriesResistance(SeriesTerm):
         self.coefficient = params.series_resistance_ohm
 
 
-class NoSeriesResistance(SeriesResistance):
+class NoSeriesResistance(SeriesTerm):
+    """``series_resistance`` switched off: a series term of 0 ohm (a sibling of ``SeriesResistance``)."""
+
+    effect: ClassVar[str] = SeriesResistance.effect
     active: ClassVar[bool] = False
+    description: ClassVar[str] = SeriesResistance.description
+    parameters: ClassVar[tuple[str, ...]] = SeriesResistance.parameters
 
     def __init__(self, params: ChannelParams) -> None:
-        SeriesTerm.__init__(self, params)
+        super().__init__(params)
         self.coefficient = zeros_like(params)

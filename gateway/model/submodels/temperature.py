@@ -28,8 +28,10 @@ class Temperature(Factor):
         return np.asarray(np.exp(p.temperature_coeff_per_k * dt))
 
 
-class NoTemperature(Temperature):
-    active: ClassVar[bool] = False
+class NoTemperature(Factor):
+    """``temperature`` switched off: ``Factor``'s unit factor (a sibling of ``Temperature``)."""
 
-    def factor(self, temperature_c: ArrayLike | None) -> FloatArray | float:
-        return 1.0
+    effect: ClassVar[str] = Temperature.effect
+    active: ClassVar[bool] = False
+    description: ClassVar[str] = Temperature.description
+    parameters: ClassVar[tuple[str, ...]] = Temperature.parameters

@@ -1,8 +1,10 @@
 """The layers of ``gateway/`` import one way only (an import-linter contract, as a test).
 
 model -> modbus -> config -> runtime -> metrics / analysis -> cli, with ``errors`` and
-``atomic`` usable by all. Only the CLI may wire the library to the simulator. Every import
-counts, including those under ``TYPE_CHECKING`` and inside functions.
+``atomic`` usable by all, and ``keys`` (the unknown-key check) by all but ``model``. Only the
+CLI may wire the library to the simulator. Every import counts, including those under
+``TYPE_CHECKING`` and inside functions; and no modules of ``gateway/`` or ``sim_device/``
+import each other round a loop.
 """
 
 from __future__ import annotations
@@ -19,17 +21,19 @@ GATEWAY = ROOT / "gateway"
 ALLOWED: dict[str, set[str]] = {
     "errors": set(),
     "atomic": set(),
+    "keys": set(),
     "model": set(),
-    "modbus": {"errors"},
-    "config": {"errors", "atomic", "model", "modbus"},
-    "runtime": {"errors", "model", "modbus", "config"},
-    "metrics": {"errors", "runtime"},
-    "web": {"errors", "runtime"},
-    "mqtt": {"errors", "config", "runtime"},
-    "analysis": {"errors", "atomic", "model", "config", "runtime"},
+    "modbus": {"errors", "keys"},
+    "config": {"errors", "atomic", "keys", "model", "modbus"},
+    "runtime": {"errors", "keys", "model", "modbus", "config"},
+    "metrics": {"errors", "keys", "runtime"},
+    "web": {"errors", "keys", "runtime"},
+    "mqtt": {"errors", "keys", "config", "runtime"},
+    "analysis": {"errors", "atomic", "keys", "model", "config", "runtime"},
     "cli": {
         "errors",
         "atomic",
+        "keys",
         "model",
         "modbus",
         "config",
@@ -105,3 +109,100 @@ def test_the_checker_sees_a_violation(tmp_path: Path) -> None:
     found = _imports(fake, root=tmp_path)
     assert (1, "gateway.runtime") in found and (2, "gateway.metrics") in found
     assert {_room(m) for _, m in found} - {None, "model"} - ALLOWED["model"] == {"runtime", "metrics"}
+
+
+# ------------------------------------------------------------------------- import cycles
+SIM_DEVICE = ROOT / "sim_device"
+
+
+def _module_name(path: Path, root: Path = ROOT) -> str:
+    """``gateway/model/__init__.py`` -> ``gateway.model``; ``sim_device/maps.py`` -> ``sim_device.maps``."""
+    parts = path.relative_to(root).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph(paths: list[Path], root: Path = ROOT) -> dict[str, set[str]]:
+    """Module -> the modules of ``paths`` it imports (every import: at module level, inside
+    functions, under ``TYPE_CHECKING``). ``from package import name`` counts as an import of
+    the submodule ``package.name`` when that is one of ours, else of the package."""
+    names = {_module_name(p, root): p for p in paths}
+    graph: dict[str, set[str]] = {name: set() for name in names}
+    for name, path in names.items():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(tree):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    anchor = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+                    module = ".".join([*anchor, node.module] if node.module else anchor)
+                else:
+                    module = node.module or ""
+                subs = [f"{module}.{a.name}" for a in node.names if f"{module}.{a.name}" in names]
+                targets = subs if len(subs) == len(node.names) else [module, *subs]
+            for target in targets:
+                if target in names and target != name:
+                    graph[name].add(target)
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for succ in sorted(graph[node]):
+            if succ not in index:
+                visit(succ)
+                low[node] = min(low[node], low[succ])
+            elif succ in on_stack:
+                low[node] = min(low[node], index[succ])
+        if low[node] == index[node]:
+            component: list[str] = []
+            while True:
+                top = stack.pop()
+                on_stack.discard(top)
+                component.append(top)
+                if top == node:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return sorted(found)
+
+
+def test_no_module_import_cycles() -> None:
+    """No two modules of ``gateway/`` or ``sim_device/`` import each other, directly or round a
+    loop, however the import is hidden (inside a function, under ``TYPE_CHECKING``): a design
+    cycle is broken with a factory or loader module above its files, not by deferring an import."""
+    paths = sorted([*GATEWAY.rglob("*.py"), *SIM_DEVICE.rglob("*.py")])
+    cycles = _cycles(_import_graph(paths))
+    assert not cycles, "module import cycles:\n" + "\n".join(" <-> ".join(c) for c in cycles)
+
+
+def test_the_cycle_checker_sees_hidden_cycles(tmp_path: Path) -> None:
+    """A cycle hidden in a function and under ``TYPE_CHECKING`` is found; a one-way chain is not."""
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("", encoding="utf-8")
+    (pkg / "a.py").write_text("def f():\n    from .b import g\n", encoding="utf-8")
+    (pkg / "b.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg import c\n", encoding="utf-8"
+    )
+    (pkg / "c.py").write_text("from . import a\n", encoding="utf-8")
+    (pkg / "d.py").write_text("from .a import f\nfrom . import c\n", encoding="utf-8")
+    graph = _import_graph(sorted(pkg.glob("*.py")), root=tmp_path)
+    assert graph["pkg.c"] == {"pkg.a"} and graph["pkg.b"] == {"pkg.c"}
+    assert _cycles(graph) == [["pkg.a", "pkg.b", "pkg.c"]]
