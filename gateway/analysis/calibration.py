@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..atomic import atomic_write_text
+from ..config.calibration_file import CalibrationFile, ChannelCalibration, ConversionTable
 from ..model import EFFECT_PARAMETERS, SensorParams, parameter_names, parse_effects
 from ..model.curves import CurveChannel
 from .candidates import Candidate, hold_drift_pct, rank_candidates
@@ -37,7 +38,7 @@ from .fitting import FitData, FitResult, fit_channel
 from .measurement import NoiseModel, noise_model, time_is_real
 from .objectives import OFFSET
 from .records import ChannelRecord
-from .rivals import Rivals, line_range_lines, verdict
+from .rivals import LINE_ZERO_MARGIN, ConductanceLine, Rivals, verdict
 
 MODELS = ("physics", "line", "lookup", "curve", "auto")
 #: The physical model's written range reaches light touch: force_min_n = min(calibrated
@@ -428,28 +429,32 @@ def _fit_objective(
     return _Run(fit, before, plain, with_h, tuple(notes))
 
 
-def calibration_toml(
+#: The first line of a file ``calibration_toml`` writes.
+HEADER = (
+    "Written by `tactile-gateway calibrate` (docs/calibration.md); the gateway reads every table but [meta]."
+)
+
+
+def calibration_file(
     calibrations: Iterable[Calibration], model: str = "physics", names: Mapping[str, str] | None = None
-) -> str:
-    """A calibration file: ``[channel.<name>]`` parameter tables the gateway config reads, and
-    for a channel whose chosen model is a rival, a ``[line.<name>]`` or ``[lookup.<name>]``
-    table (``docs/calibration.md``; the runtime does not read these yet)."""
+) -> CalibrationFile:
+    """The calibration file of ``calibrations``: per channel (renamed by ``names``) a
+    ``[channel.<name>]`` table (the physical model's parameters, its force range and the
+    calibrated range) and, for a channel whose chosen ``model`` is a rival, its ``[line]``,
+    ``[lookup]`` or ``[curve]`` table; ``[meta]`` names the record and the effects."""
     if model not in MODELS:
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
     items = list(calibrations)
     rename = dict(names or {})
-    lines = ["# Written by `tactile-gateway calibrate`; the gateway reads the [channel.<name>] tables."]
-    if items:
-        effects = ", ".join(f'"{e}"' for e in items[0].fit.effects)
-        lines += ["", "[meta]", f'record = "{items[0].record}"', f"effects = [{effects}]"]
-        lines += [
-            f"# reference zero offset fitted: {c.offset_words()} ({rename.get(c.channel, c.channel)}: "
-            "its calibrated_min_n/calibrated_max_n are the record's range + offset)"
-            for c in items
-            if c.offset_words()
-        ]
+    meta_comments = tuple(
+        f"reference zero offset fitted: {c.offset_words()} ({rename.get(c.channel, c.channel)}: "
+        "its calibrated_min_n/calibrated_max_n are the record's range + offset)"
+        for c in items
+        if c.offset_words()
+    )
     known = set(parameter_names())
-    rivals: list[str] = []
+    channels: dict[str, ChannelCalibration] = {}
+    conversions: dict[str, ConversionTable] = {}
     for cal in items:
         name = rename.get(cal.channel, cal.channel)
         kind = cal.best if model == "auto" else model
@@ -458,67 +463,94 @@ def calibration_toml(
                 raise ValueError(f"channel {cal.channel!r}: no curve could be fitted to the record")
             kind = cal.candidates[0].name
         rms = cal.force_rms().get(kind, math.nan)
-        lines += [
-            "",
-            f'[channel."{name}"]',
-            f"# model: {kind}, held-out force RMS {rms:.4g} N ({cal.verdict})",
-        ]
-        lines.append(f"# parameters fitted with the {OBJECTIVE_WORDS[cal.fit.objective]} objective")
-        for est in cal.fit.estimates:
-            if est.name in known:
-                lines.append(f"{est.name} = {_toml_float(est.value)}")
+        params = {est.name: float(est.value) for est in cal.fit.estimates if est.name in known}
         # a rival reads F_ref, so its channel keeps the record's own range
         low, high = cal.force_range_n if kind == "physics" else cal.record_range_n
         # the physical model reads beyond the calibrated range (flagged extrapolated there);
         # a rival's own range is the calibrated one, and it reads beyond it along itself
         model_low, model_high = model_force_range((low, high)) if kind == "physics" else (low, high)
-        lines.append(f"force_min_n = {_toml_float(model_low)}")
-        lines.append(f"force_max_n = {_toml_float(model_high)}")
-        lines.append(f"# calibrated on {low:.4g}-{high:.4g} N: outside it forces read flagged extrapolated")
-        lines.append(f"calibrated_min_n = {_toml_float(low)}")
-        lines.append(f"calibrated_max_n = {_toml_float(high)}")
+        params.update(force_min_n=float(model_low), force_max_n=float(model_high))
+        channels[name] = ChannelCalibration(
+            params,
+            calibrated_range_n=(float(low), float(high)),
+            comments={
+                next(iter(params)): (
+                    f"model: {kind}, held-out force RMS {rms:.4g} N ({cal.verdict})",
+                    f"parameters fitted with the {OBJECTIVE_WORDS[cal.fit.objective]} objective",
+                ),
+                "calibrated_min_n": (
+                    f"calibrated on {low:.4g}-{high:.4g} N: outside it forces read flagged extrapolated",
+                ),
+            },
+        )
         if kind == "line":
-            rivals += [
-                "",
-                f'[line."{name}"]',
-                f"slope_s_per_n = {_toml_float(cal.rivals.line.slope_s_per_n)}",
-                f"intercept_s = {_toml_float(cal.rivals.line.intercept_s)}",
-                f"held_out_force_rms_n = {_toml_float(cal.rivals.line_force_rms_n)}",
-                *line_range_lines(cal.rivals.line, low),
-            ]
+            line = cal.rivals.line
+            values: dict[str, Any] = {
+                "slope_s_per_n": float(line.slope_s_per_n),
+                "intercept_s": float(line.intercept_s),
+                "held_out_force_rms_n": float(cal.rivals.line_force_rms_n),
+            }
+            comments: dict[str, tuple[str, ...]] = {}
+            floor_n = _line_floor_n(line, low)
+            if floor_n is not None:
+                values["force_min_n"] = floor_n
+                comments["force_min_n"] = (
+                    f"the line reaches zero conductance at {floor_n / LINE_ZERO_MARGIN:.4g} N: it reads "
+                    f"from {floor_n:.4g} N (no contact below), not from the record's {low:.4g} N",
+                )
+            conversions[name] = ConversionTable("line", values, comments)
         elif (cand := cal.candidate(kind)) is not None:
-            rivals += ["", f'[curve."{name}"]', *curve_table_lines(cand.channel, cal.record_range_n)]
-            rivals.append(f"held_out_force_rms_n = {_toml_float(cand.held_out_force_rms_n)}")
+            values = curve_table(cand.channel, cal.record_range_n)
+            values["held_out_force_rms_n"] = float(cand.held_out_force_rms_n)
+            conversions[name] = ConversionTable("curve", values)
         elif kind == "lookup":
             lk = cal.rivals.lookup
-            rivals += [
-                "",
-                f'[lookup."{name}"]',
-                "resistance_ohm = [" + ", ".join(_toml_float(math.exp(x)) for x in lk.log_r) + "]",
-                "force_n = [" + ", ".join(_toml_float(f) for f in lk.force_n) + "]",
-                f"held_out_force_rms_n = {_toml_float(cal.rivals.lookup_force_rms_n)}",
-            ]
-    return "\n".join(lines + rivals) + "\n"
+            values = {
+                "resistance_ohm": [math.exp(x) for x in lk.log_r],
+                "force_n": [float(f) for f in lk.force_n],
+                "held_out_force_rms_n": float(cal.rivals.lookup_force_rms_n),
+            }
+            conversions[name] = ConversionTable("lookup", values)
+    return CalibrationFile(
+        channels,
+        conversions,
+        record=items[0].record if items else None,
+        effects=tuple(items[0].fit.effects) if items else None,
+        header=(HEADER,),
+        meta_comments=meta_comments,
+    )
 
 
-def curve_table_lines(channel: CurveChannel, calibrated_range_n: tuple[float, float]) -> list[str]:
+def calibration_toml(
+    calibrations: Iterable[Calibration], model: str = "physics", names: Mapping[str, str] | None = None
+) -> str:
+    """The text of ``calibration_file(calibrations, model, names)`` (``docs/calibration.md``):
+    the gateway's configuration reads its ``[channel.<name>]``, ``[line.<name>]``,
+    ``[lookup.<name>]`` and ``[curve.<name>]`` tables (``config.calibration_file``)."""
+    return calibration_file(calibrations, model, names).to_toml()
+
+
+def _line_floor_n(line: ConductanceLine, record_min_n: float) -> float | None:
+    """The ``[line]`` table's own ``force_min_n`` when the channel's (the record's lowest force)
+    lies at or below 1.1 x the line's zero-conductance force -n/m (n < 0): below -n/m a sensor
+    at rest would read a force (``rivals.line_range_lines``, ``model.conversion.LineConversion``)."""
+    if line.intercept_s >= 0.0:
+        return None
+    floor_n = LINE_ZERO_MARGIN * float(line.force(math.inf))  # an open sensor reads -n/m
+    return floor_n if record_min_n <= floor_n else None
+
+
+def curve_table(channel: CurveChannel, calibrated_range_n: tuple[float, float]) -> dict[str, Any]:
     """The body of a ``[curve.<name>]`` table (``gateway.model.curves.curve_from_table``): kind,
     the static curve's parameters, the sensitivity, the drift and the calibrated force range."""
-    out = [f'kind = "{channel.curve.kind}"']
+    out: dict[str, Any] = {"kind": channel.curve.kind}
     for key, value in channel.curve.table().items():
-        if isinstance(value, list):
-            out.append(f"{key} = [" + ", ".join(_toml_float(v) for v in value) + "]")
-        else:
-            out.append(f"{key} = {_toml_float(value)}")
-    out += [f"gain = {_toml_float(channel.gain)}", f"offset_n = {_toml_float(channel.offset_n)}"]
-    out += [f"{key} = {_toml_float(value)}" for key, value in channel.drift.table().items()]
+        out[key] = [float(v) for v in value] if isinstance(value, list) else float(value)
+    out.update(gain=float(channel.gain), offset_n=float(channel.offset_n))
+    out.update({key: float(value) for key, value in channel.drift.table().items()})
     low, high = calibrated_range_n
-    out += [f"force_min_n = {_toml_float(max(low, 0.0))}", f"force_max_n = {_toml_float(high)}"]
+    out.update(force_min_n=max(float(low), 0.0), force_max_n=float(high))
     return out
-
-
-def _toml_float(value: float) -> str:
-    return "inf" if math.isinf(value) else repr(float(value))
 
 
 def write_calibration(

@@ -14,14 +14,14 @@ Two sources:
   them; one load fits the gain alone (offset kept), two or more fit both.
 
 The fit is a bounded least squares in (ln gain, offset): gain within [1/20, 20] x the stored
-one. The file is rewritten with only the ``gain`` and ``offset_n`` lines of the updated tables
-changed (comments and every other table kept), atomically.
+one. The file is read with the gateway's checks (``config.calibration_file.load_calibration``)
+and rewritten with only the ``gain`` and ``offset_n`` values of the updated tables changed
+(``set_table_values``: tomlkit, comments and every other table kept), atomically.
 """
 
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -32,6 +32,8 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from ..atomic import atomic_write_text
+from ..config.calibration_file import load_calibration, set_table_values
+from ..errors import ConfigError
 from ..model.curves import CurveChannel, CurveError, curve_from_table, track_series
 from .records import ChannelRecord
 
@@ -91,25 +93,21 @@ class SensitivityUpdate:
 
 
 def load_curves(path: Path) -> dict[str, CurveChannel]:
-    """The ``[curve.<name>]`` tables of a calibration file, by channel name."""
+    """The ``[curve.<name>]`` tables of a calibration file (``load_calibration``), by channel name."""
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-    except OSError as exc:
-        raise UpdateError(f"cannot read {path}: {exc.strerror or exc}") from None
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError, ValueError) as exc:
-        raise UpdateError(f"{path} is not a calibration file: {exc}") from None
-    tables = data.get("curve", {})
-    if not isinstance(tables, dict) or not tables:
+        cal = load_calibration(path)
+    except ConfigError as exc:
+        raise UpdateError(str(exc)) from None
+    tables = {name: t.values for name, t in cal.conversions.items() if t.kind == "curve"}
+    if not tables:
         raise UpdateError(
             f"{path} has no [curve.<name>] table: --update re-fits the sensitivity of a curve calibration "
             "(write one with `calibrate --model curve`, or `--model auto` where a curve ranks first)"
         )
     out: dict[str, CurveChannel] = {}
     for name, body in tables.items():
-        if not isinstance(body, dict):
-            raise UpdateError(f"{path}: [curve.{name}] is not a table")
         try:
-            out[name] = curve_from_table(body)
+            out[name] = curve_from_table(dict(body))
         except CurveError as exc:
             raise UpdateError(f"{path}: curve.{name}.{exc.key}: {exc.message}") from None
     return out
@@ -190,41 +188,15 @@ def update_from_loads(
     )  # fmt: skip
 
 
-_HEADER = re.compile(r'^\s*\[\s*curve\s*\.\s*(?:"([^"]*)"|([A-Za-z0-9_-]+))\s*\]\s*(#.*)?$')
-_ANY_HEADER = re.compile(r"^\s*\[")
-_KEY = re.compile(r"^\s*(gain|offset_n)\s*=")
-
-
 def rewrite_sensitivity(text: str, updates: Mapping[str, CurveChannel]) -> str:
-    """``text`` with the ``gain`` and ``offset_n`` lines of each updated ``[curve.<name>]``
-    table replaced (added after the header when absent); every other line as it was."""
-    lines = text.splitlines()
-    out: list[str] = []
-    current: str | None = None
-    pending: dict[str, str] = {}
-
-    def flush() -> None:
-        if current is not None and pending:
-            out.extend(f"{k} = {v}" for k, v in pending.items())
-        pending.clear()
-
-    for line in lines:
-        m = _HEADER.match(line)
-        if m or _ANY_HEADER.match(line):
-            flush()
-            current = (m.group(1) if m.group(1) is not None else m.group(2)) if m else None
-            out.append(line)
-            if current is not None and current in updates:
-                ch = updates[current]
-                pending.update(gain=repr(float(ch.gain)), offset_n=repr(float(ch.offset_n)))
-            continue
-        k = _KEY.match(line)
-        if current is not None and k and k.group(1) in pending:
-            out.append(f"{k.group(1)} = {pending.pop(k.group(1))}")
-            continue
-        out.append(line)
-    flush()
-    return "\n".join(out) + "\n"
+    """``text`` with the ``gain`` and ``offset_n`` of each updated ``[curve.<name>]`` table
+    set (added at the table's end when absent); every other line as it was
+    (``config.calibration_file.set_table_values``)."""
+    values = {name: {"gain": ch.gain, "offset_n": ch.offset_n} for name, ch in updates.items()}
+    try:
+        return set_table_values(text, "curve", values)
+    except KeyError as exc:
+        raise UpdateError(f"no [curve.{exc.args[0]}] table to update") from None
 
 
 def write_updated(path: Path, out_path: Path, updates: Mapping[str, CurveChannel]) -> None:

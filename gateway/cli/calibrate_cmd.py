@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import tomllib
 from pathlib import Path
 
 import click
@@ -17,7 +16,8 @@ from ..analysis.calibration import (
     write_calibration,
 )
 from ..analysis.records import DEFAULT_CHANNEL, read_record
-from ..errors import RecordError
+from ..config.calibration_file import check_calibration_file
+from ..errors import ConfigError, RecordError
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
 from .common import parse_assignments
 
@@ -270,23 +270,17 @@ def ch_record(record: object, name: str) -> object:
     return record.channel(name)
 
 
-#: The top-level tables a calibration file has (``analysis.calibration.calibration_toml``).
-_CALIBRATION_TABLES = frozenset({"meta", "channel", "line", "lookup", "curve"})
-
-
 def _check_out(path: Path, overwrite: bool) -> None:
-    """Refuse a missing folder, and an existing file that is not a calibration file."""
+    """Refuse a missing folder, and an existing file that is not a calibration file
+    (``config.calibration_file.check_calibration_file``: the gateway's own reading of one)."""
     if not path.parent.is_dir():
         raise click.UsageError(f"--out: directory {path.parent} does not exist")
     if not path.exists() or overwrite:
         return
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-        kind_ok = bool(data) and set(data) <= _CALIBRATION_TABLES
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):  # ValueError: TOMLDecodeError too
-        kind_ok = False
-    if not kind_ok:
+        check_calibration_file(path)
+    except ConfigError as exc:
         raise click.UsageError(
             f"--out: {path} exists and is not a calibration file (it could be your gateway configuration); "
-            "refusing to replace it: choose another file, or --force"
-        )
+            f"refusing to replace it: choose another file, or --force ({exc})"
+        ) from None

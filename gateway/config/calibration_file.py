@@ -1,10 +1,16 @@
-"""A calibration file on its own, read exactly as the gateway reads a device's ``calibration``.
+"""The calibration file for the rest of the gateway: read it, recognise it, read a record with it.
+
+The file's format (``CalibrationFile``, its ``to_toml``, the checks of every table) is
+``calibration_format``'s; ``load_calibration`` here reads a file with the configuration's own
+check of sensor parameters (``device``'s), as ``[[bus.device]] calibration = "..."`` does, and
+``check_calibration_file`` says whether a file is one (``calibrate --out`` replaces nothing
+else).
 
 ``tactile-gateway apply`` replays a record through the runtime with a calibration file and no
 gateway configuration. It needs the channels the file configures and a device whose channels
 get their parameters, unloaded baselines and line or lookup tables from the file; both come
-from the functions ``[[bus.device]] calibration = "..."`` goes through
-(``device._load_calibration``, ``device.parse_device``), nothing here reads a value itself.
+from the functions ``[[bus.device]] calibration = "..."`` goes through (``load_calibration``,
+``device.parse_device``), nothing here reads a value itself.
 
 The device (``calibrated_device``) reports float32 resistances (ohm) and fault bitmaps, and
 names a 64-bit device clock, so that a caller can pass each sample's time as the device's
@@ -19,17 +25,36 @@ from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
-from ..model.conversion import CONVERSION_KINDS
 from ..model.effects import PAPER_EFFECTS
-from .device import _load_calibration, parse_device
+from .calibration_format import (
+    CALIBRATED_RANGE_KEYS,
+    CALIBRATION_TABLES,
+    END,
+    CalibrationFile,
+    ChannelCalibration,
+    ConversionTable,
+    read_calibration,
+    read_toml,
+    set_table_values,
+)
+from .device import _parse_param_overrides, parse_device
 from .schema import MAX_CHANNELS, DeviceConfig
-from .tables import _NAME_RE, _NAME_RULE, Context, parse_toml, read_text_file
+from .tables import _NAME_RE, _NAME_RULE, Context
 
 __all__ = [
     "CALIBRATED_DEVICE_CLOCK_TICK_S",
+    "CALIBRATED_RANGE_KEYS",
+    "CALIBRATION_TABLES",
+    "END",
+    "CalibrationFile",
+    "ChannelCalibration",
+    "ConversionTable",
     "calibrated_device",
     "calibration_channels",
     "calibration_effects",
+    "check_calibration_file",
+    "load_calibration",
+    "set_table_values",
 ]
 
 #: The tick of ``calibrated_device``'s clock: a nanosecond counter (64 bit, so no wrap).
@@ -41,24 +66,41 @@ _CLOCK_ADDRESS, _STATUS_ADDRESS, _FLOAT_ADDRESS = 2, 16, 100
 _KEY = "calibration"
 
 
+def load_calibration(
+    path: Path, channel_names: Sequence[str] | None = None, *, named_at: tuple[Context, str] | None = None
+) -> CalibrationFile:
+    """The calibration file at ``path``, read and checked as the gateway reads a device's
+    ``calibration`` (``calibration_format.read_calibration`` with the configuration's check of
+    sensor parameters): every table must name one of ``channel_names`` (None: any name).
+    ``ConfigError`` names the file and the key path (and, with ``named_at``, what named it)."""
+    return read_calibration(path, channel_names, _parse_param_overrides, named_at=named_at)
+
+
+def check_calibration_file(path: Path) -> CalibrationFile:
+    """The calibration file at ``path`` if it is one: TOML with at least one table, every
+    top-level table a calibration file's (``CALIBRATION_TABLES``: a gateway configuration is
+    not one), read by ``load_calibration``; ``ConfigError`` saying why not otherwise."""
+    data = read_toml(path)
+    if not data:
+        raise ConfigError(f"{path}: an empty TOML file")
+    others = [key for key in data if key not in CALIBRATION_TABLES]
+    if others:
+        raise ConfigError(
+            f"{path}: {', '.join(others)}: not a table of a calibration file "
+            f"(those are {', '.join(CALIBRATION_TABLES)})"
+        )
+    return read_calibration(path, None, _parse_param_overrides, data=data)
+
+
 def _absolute(file: Path) -> Path:
     """The path as the gateway resolves a device's ``calibration`` (absolute, not resolved)."""
     return Path(os.path.abspath(file))
 
 
 def _note(file: Path) -> str:
-    """What ``_load_calibration`` and ``parse_device`` append to a calibration file's message:
+    """What ``load_calibration`` and ``parse_device`` append to a calibration file's message:
     the device configuration that named it, of which there is none here."""
     return f" (calibration file of {_KEY} in {file})"
-
-
-def _data(file: Path) -> dict[str, Any]:
-    """The file's TOML (``ConfigError`` naming the file when it is missing or is not TOML)."""
-    if not file.exists():
-        raise ConfigError(f"{file}: no such file (calibration file)")
-    if file.is_dir():
-        raise ConfigError(f"{file}: is a directory, not a calibration file")
-    return parse_toml(Context(file), read_text_file(file, "calibration file"), "calibration")
 
 
 def _device(
@@ -96,30 +138,17 @@ def calibration_channels(file: Path) -> tuple[str, ...]:
     ``[lookup.<name>]``), in the order they first appear, after the gateway's own checks of
     every table (``ConfigError`` naming the file and key, as the gateway's)."""
     file = _absolute(file)
-    data = _data(file)
-    names: dict[str, None] = {}
-    for kind in ("channel", *CONVERSION_KINDS):
-        tables = data.get(kind, {})
-        if isinstance(tables, dict):
-            names.update(dict.fromkeys(tables))
-    try:  # the tables' own checks, then what parse_device checks of them (lines, merged ranges)
-        _load_calibration(Context(file), _KEY, file, list(names))
-    except ConfigError as exc:
-        raise ConfigError(str(exc).removesuffix(_note(file))) from None
-    if names:
-        _device(file, list(names), names, "calibration", PAPER_EFFECTS)
-    return tuple(names)
+    names = load_calibration(file).channel_names()  # the tables' own checks
+    if names:  # then what parse_device checks of them (lines, merged ranges)
+        _device(file, list(names), set(names), "calibration", PAPER_EFFECTS)
+    return names
 
 
 def calibration_effects(file: Path) -> tuple[str, ...] | None:
     """The effects the calibration was fitted with (``[meta] effects``, written by
     ``calibrate``), or None when the file does not say. The gateway does not read them: a
     device's effects are its ``[bus.device.model] effects`` (default: the paper's)."""
-    meta = _data(_absolute(file)).get("meta")
-    effects = meta.get("effects") if isinstance(meta, dict) else None
-    if isinstance(effects, list) and all(isinstance(e, str) for e in effects):
-        return tuple(effects)
-    return None
+    return load_calibration(_absolute(file)).effects
 
 
 def calibrated_device(

@@ -13,7 +13,6 @@ the key path.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -21,10 +20,11 @@ from typing import Any, Final
 
 from ..errors import ConfigError
 from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, MAX_READ_REGISTERS, ValueFrame
-from ..model.conversion import CONVERSION_KINDS, Conversion, ConversionError, conversion_from_table
+from ..model.conversion import Conversion, ConversionError, conversion_from_table
 from ..model.curves import DRIFT_KEYS, CurveError, Drift
 from ..model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
 from ..model.params import PARAMETER_RANGES, ParameterError, SensorParams, parameter_names
+from .calibration_format import read_calibration
 from .profiles import load_profile, merge_profile
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS, parse_baselines, parse_divider, parse_front_end, parse_layout
 from .schema import DEVICE_ID, MAX_CHANNELS, POSITION_MM, ChannelConfig, DeviceConfig
@@ -33,10 +33,7 @@ from .tables import (
     Context,
     Table,
     join_key,
-    parse_toml,
-    read_text_file,
     show_value,
-    suggest,
     type_name,
 )
 from .wire import (
@@ -80,7 +77,6 @@ DEVICE_KEYS: Final = (
 )
 _MODEL_KEYS: Final = ("effects", "params")
 _CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params")
-_CALIBRATION_CHANNEL_TABLE: Final = "channel"
 
 
 def _parse_effects(ctx: Context, path: str, value: object) -> tuple[str, ...]:
@@ -125,38 +121,6 @@ def _parse_param_overrides(ctx: Context, path: str, value: object) -> dict[str, 
     return out
 
 
-def _unknown_channel(cal_ctx: Context, where: str, name: str, channel_names: Sequence[str]) -> ConfigError:
-    return cal_ctx.error(
-        where,
-        f"no channel {name!r} in this device{suggest(name, channel_names)} "
-        f"(channels: {', '.join(channel_names[:8])}{', ...' if len(channel_names) > 8 else ''})",
-    )
-
-
-def _conversion_tables(
-    cal_ctx: Context, data: dict[str, Any], channel_names: Sequence[str]
-) -> dict[str, tuple[str, dict[str, Any]]]:
-    """``[line.<name>]`` / ``[lookup.<name>]`` / ``[curve.<name>]`` tables by channel: (kind,
-    table), checked later."""
-    out: dict[str, tuple[str, dict[str, Any]]] = {}
-    for kind in CONVERSION_KINDS:
-        tables = data.get(kind, {})
-        if not isinstance(tables, dict):
-            raise cal_ctx.error(kind, f"expected tables [{kind}.<name>], got {type_name(tables)}")
-        for name, body in tables.items():
-            where = join_key(kind, name)
-            if name not in channel_names:
-                raise _unknown_channel(cal_ctx, where, name, channel_names)
-            if not isinstance(body, dict):
-                raise cal_ctx.error(where, f"expected a table [{where}], got {type_name(body)}")
-            if name in out:
-                raise cal_ctx.error(
-                    where, f"channel {name!r} has a [{out[name][0]}] and a [{kind}] table; keep one"
-                )
-            out[name] = (kind, body)
-    return out
-
-
 def _conversion(
     cal: tuple[Path, str], name: str, table: tuple[str, dict[str, Any]], params: SensorParams
 ) -> Conversion:
@@ -171,39 +135,6 @@ def _conversion(
         raise ConfigError(f"{Context(file).error(where, exc.message)}{note}") from None
 
 
-#: The keys of a calibration's ``[channel.<name>]`` table that are not sensor parameters: the
-#: force range the channel was calibrated on (N; written by ``calibrate``; a force outside it
-#: reads ``extrapolated``).
-CALIBRATED_RANGE_KEYS: Final = ("calibrated_min_n", "calibrated_max_n")
-
-
-def _calibrated_range(cal_ctx: Context, where: str, params: dict[str, Any]) -> tuple[float, float] | None:
-    """Pop ``calibrated_min_n``/``calibrated_max_n`` off a ``[channel.<name>]`` table: the
-    calibrated force range (a missing bound is 0 N / inf), or None when neither is given."""
-    if not any(key in params for key in CALIBRATED_RANGE_KEYS):
-        return None
-    bounds = {"calibrated_min_n": 0.0, "calibrated_max_n": math.inf}
-    for key in CALIBRATED_RANGE_KEYS:
-        if key not in params:
-            continue
-        value = params.pop(key)
-        low_ok = key == "calibrated_min_n" and isinstance(value, int | float) and 0.0 <= value < math.inf
-        high_ok = key == "calibrated_max_n" and isinstance(value, int | float) and 0.0 < value <= math.inf
-        if isinstance(value, bool) or not (low_ok or high_ok):
-            allowed = "[0, inf) N" if key == "calibrated_min_n" else "(0, inf] N"
-            raise cal_ctx.error(
-                join_key(where, key), f"{show_value(value)} is out of range; allowed: {allowed}"
-            )
-        bounds[key] = float(value)
-    low, high = bounds["calibrated_min_n"], bounds["calibrated_max_n"]
-    if not low < high:
-        raise cal_ctx.error(
-            join_key(where, "calibrated_max_n"),
-            f"{high!r} is out of range; allowed: (calibrated_min_n = {low!r}, inf] N",
-        )
-    return low, high
-
-
 def _load_calibration(
     ctx: Context, path: str, file: Path, channel_names: Sequence[str]
 ) -> tuple[
@@ -212,53 +143,12 @@ def _load_calibration(
     dict[str, tuple[str, dict[str, Any]]],
     dict[str, tuple[float, float]],
 ]:
-    """Per-channel parameter tables ``[channel.<name>]`` of a calibration file, the
-    channels' unloaded baselines (``baseline_ohm`` in the same tables), their line or
-    lookup tables (``[line.<name>]``, ``[lookup.<name>]``) and their calibrated force ranges
-    (``calibrated_min_n``/``calibrated_max_n`` in the ``[channel.<name>]`` tables)."""
-    if not file.exists():
-        raise ctx.error(path, f"{file} does not exist (calibration file)")
-    try:
-        text = read_text_file(file, "calibration file")
-    except ConfigError as exc:
-        raise ctx.error(path, str(exc)) from None
-    cal_ctx = Context(file)
-    note = f" (calibration file of {path} in {ctx.label})"
-    try:
-        data = parse_toml(cal_ctx, text, "calibration")
-        tables = data.get(_CALIBRATION_CHANNEL_TABLE, {})
-        if not isinstance(tables, dict):
-            raise cal_ctx.error("channel", f"expected tables [channel.<name>], got {type_name(tables)}")
-        out: dict[str, dict[str, float]] = {}
-        baselines: dict[str, float] = {}
-        ranges: dict[str, tuple[float, float]] = {}
-        for name, params in tables.items():
-            if name not in channel_names:
-                raise _unknown_channel(cal_ctx, join_key("channel", name), name, channel_names)
-            where = join_key("channel", name)
-            if isinstance(params, dict) and any(key in params for key in CALIBRATED_RANGE_KEYS):
-                params = dict(params)
-                calibrated = _calibrated_range(cal_ctx, where, params)
-                if calibrated is not None:
-                    ranges[name] = calibrated
-            if isinstance(params, dict) and "baseline_ohm" in params:
-                params = dict(params)
-                value = params.pop("baseline_ohm")
-                if (
-                    isinstance(value, bool)
-                    or not isinstance(value, int | float)
-                    or not 0.0 < value < math.inf
-                ):
-                    raise cal_ctx.error(
-                        join_key(where, "baseline_ohm"),
-                        f"{show_value(value)} is out of range; allowed: (0, inf) ohm",
-                    )
-                baselines[name] = float(value)
-            out[name] = _parse_param_overrides(cal_ctx, where, params)
-        conversions = _conversion_tables(cal_ctx, data, channel_names)
-    except ConfigError as exc:
-        raise ConfigError(f"{exc}{note}") from None
-    return out, baselines, conversions, ranges
+    """The calibration file named at ``path`` of ``ctx`` (``calibration_format.read_calibration``):
+    per-channel parameter tables ``[channel.<name>]``, the channels' unloaded baselines
+    (``baseline_ohm``), their line, lookup or curve tables (kind, table) and their calibrated
+    force ranges (``calibrated_min_n``/``calibrated_max_n``)."""
+    cal = read_calibration(file, channel_names, _parse_param_overrides, named_at=(ctx, path))
+    return cal.params(), cal.baselines(), cal.conversion_tables(), cal.calibrated_ranges()
 
 
 def _output_drift(table: Table, frame: ValueFrame | None) -> Drift | None:
