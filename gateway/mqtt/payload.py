@@ -7,10 +7,9 @@ static force (N), the resistance (ohm) and the status. Absent values are ``null`
 NaN in the binary layout. ``docs/mqtt.md`` documents both; ``decode_binary`` reads the binary
 layout back into the same dictionary ``frame_dict`` builds.
 
-Every float of a frame is rounded to ``DECIMALS`` (6) decimals, as the page's frames are: 1 µN,
-1 µΩ, 1 µs, 1 µm² and 1 nm are far below what a tactile channel or a clock resolves, and no
-binary float noise (``15.620000000000001``) reaches a subscriber. Rounding to decimals, not
-to significant digits, keeps the Unix time to the microsecond.
+The JSON is a view of the snapshot's one ``Frame`` (``runtime.frame``, shared with the page
+and the stream): every float rounded to ``DECIMALS`` (6) decimals, None where absent (the
+frame's reasons, and its one NaN policy, ``finite_or_none``).
 
 Binary layout (little-endian, ``BINARY_VERSION`` 1)::
 
@@ -36,41 +35,51 @@ from __future__ import annotations
 import json
 import math
 import struct
-from typing import Any, Final
+from typing import Any, Final, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import GatewayError
+from ..runtime.frame import DECIMALS, Frame, frame_of
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
-__all__ = ["BINARY_MAGIC", "FrameDecodeError", "decode_binary", "encode_binary", "encode_json", "frame_dict"]
+__all__ = [
+    "BINARY_MAGIC",
+    "DECIMALS",
+    "FrameDecodeError",
+    "FrameFields",
+    "decode_binary",
+    "encode_binary",
+    "encode_json",
+    "frame_dict",
+]
 
 BINARY_MAGIC: Final = b"TGF1"
 _HEADER: Final = struct.Struct("<4sQdddddd HH")
-DECIMALS: Final = 6
+
+
+class FrameFields(TypedDict):
+    """A frame's fields as published in JSON (``docs/mqtt.md``), in this order."""
+
+    sequence: int
+    device: str
+    host_time_s: float
+    device_time_s: float | None
+    up: bool
+    total_force_n: float
+    center_of_pressure_mm: list[float] | None
+    contact_area_mm2: float
+    channels_in_contact: int
+    channels: list[str]
+    force_n: list[float | None]
+    force_static_n: list[float | None]
+    resistance_ohm: list[float | None]
+    status: list[str]
 
 
 class FrameDecodeError(GatewayError):
     """Bytes that are not a binary frame of this layout."""
-
-
-def _opt(value: float | None) -> float | None:
-    return None if value is None or not math.isfinite(value) else float(value)
-
-
-def _num(value: float) -> float:
-    """A published float: rounded to ``DECIMALS`` (finite values only reach here)."""
-    return round(float(value), DECIMALS)
-
-
-def _opt_num(value: float | None) -> float | None:
-    v = _opt(value)
-    return None if v is None else round(v, DECIMALS)
-
-
-def _num_values(array: Any) -> list[float | None]:
-    return finite_or_none(np.asarray(array, dtype=np.float64), DECIMALS)
 
 
 def _float32_values(array: NDArray[np.float32]) -> list[float | None]:
@@ -80,29 +89,30 @@ def _float32_values(array: NDArray[np.float32]) -> list[float | None]:
     return [round(float(str(v)), DECIMALS) if np.isfinite(v) else None for v in array]
 
 
-def frame_dict(snapshot: DeviceSnapshot, sequence: int) -> dict[str, Any]:
+def frame_dict(source: DeviceSnapshot | Frame, sequence: int) -> FrameFields:
     """One poll of a device as the frame's fields (JSON-ready: no NaN, None for absent; every
-    float rounded to ``DECIMALS`` decimals)."""
-    cop = snapshot.center_of_pressure_mm
+    float rounded to ``DECIMALS`` decimals): a view of the snapshot's shared ``Frame``."""
+    f = frame_of(source) if isinstance(source, DeviceSnapshot) else source
+    cop = f.center_of_pressure_mm
     return {
         "sequence": int(sequence),
-        "device": snapshot.device,
-        "host_time_s": _num(snapshot.timestamp_s),
-        "device_time_s": _opt_num(snapshot.device_time_s),
-        "up": bool(snapshot.up),
-        "total_force_n": _num(snapshot.total_force_n),
-        "center_of_pressure_mm": None if cop is None else [_num(cop[0]), _num(cop[1])],
-        "contact_area_mm2": _num(snapshot.contact_area_mm2),
-        "channels_in_contact": int(snapshot.channels_in_contact),
-        "channels": list(snapshot.channel_names),
-        "force_n": _num_values(snapshot.force_n),
-        "force_static_n": _num_values(snapshot.force_static_n),
-        "resistance_ohm": _num_values(snapshot.resistance_ohm),
-        "status": [STATUS_LABELS[int(s)] for s in snapshot.status],
+        "device": f.device,
+        "host_time_s": f.host_time_s,
+        "device_time_s": f.device_time_s,
+        "up": f.up,
+        "total_force_n": f.total_force_n,
+        "center_of_pressure_mm": None if cop is None else [cop[0], cop[1]],
+        "contact_area_mm2": f.contact_area_mm2,
+        "channels_in_contact": f.channels_in_contact,
+        "channels": list(f.channel_names),
+        "force_n": list(f.force_n),
+        "force_static_n": list(f.force_static_n),
+        "resistance_ohm": list(f.resistance_ohm),
+        "status": [s.label for s in f.status],
     }
 
 
-def encode_json(frame: dict[str, Any]) -> bytes:
+def encode_json(frame: FrameFields) -> bytes:
     return json.dumps(frame, separators=(",", ":"), allow_nan=False).encode("utf-8")
 
 
@@ -110,7 +120,7 @@ def _nan(value: float | None) -> float:
     return math.nan if value is None else float(value)
 
 
-def encode_binary(frame: dict[str, Any]) -> bytes:
+def encode_binary(frame: FrameFields) -> bytes:
     """The binary layout of a ``frame_dict`` (channel names are in the retained meta message)."""
     n = len(frame["force_n"])
     cop = frame["center_of_pressure_mm"] or (None, None)
@@ -126,17 +136,16 @@ def encode_binary(frame: dict[str, Any]) -> bytes:
         min(frame["channels_in_contact"], 0xFFFF),
         n,
     )
-    arrays = [np.array([_nan(v) for v in frame[key]], dtype="<f4").tobytes() for key in _FLOAT_KEYS]
+    per_channel = (frame["force_n"], frame["force_static_n"], frame["resistance_ohm"])
+    arrays = [np.array([_nan(v) for v in values], dtype="<f4").tobytes() for values in per_channel]
     status = np.array([STATUS_LABELS.index(s) for s in frame["status"]], dtype=np.uint8).tobytes()
     return header + b"".join(arrays) + status
 
 
-_FLOAT_KEYS: Final = ("force_n", "force_static_n", "resistance_ohm")
-
-
 def decode_binary(data: bytes, device: str = "", channels: list[str] | None = None) -> dict[str, Any]:
-    """A binary frame back into the fields of ``frame_dict`` (the per-channel floats to float32
-    precision, printed as the shortest decimal of that precision and rounded as in JSON).
+    """A binary frame back into the fields of ``frame_dict``, as a received JSON frame's are
+    (the per-channel floats to float32 precision, printed as the shortest decimal of that
+    precision and rounded as in JSON).
     ``device`` and ``channels`` come from the topic and the meta message. ``FrameDecodeError``
     if the bytes are not a frame."""
     if len(data) < _HEADER.size:
@@ -148,9 +157,9 @@ def decode_binary(data: bytes, device: str = "", channels: list[str] | None = No
     if len(data) != expected:
         raise FrameDecodeError(f"a binary frame of {n} channels has {expected} bytes, got {len(data)}")
     offset = _HEADER.size
-    values: dict[str, list[float | None]] = {}
-    for key in _FLOAT_KEYS:
-        values[key] = _float32_values(np.frombuffer(data, dtype="<f4", count=n, offset=offset))
+    values: list[list[float | None]] = []  # force_n, force_static_n, resistance_ohm
+    for _ in range(3):
+        values.append(_float32_values(np.frombuffer(data, dtype="<f4", count=n, offset=offset)))
         offset += 4 * n
     codes = np.frombuffer(data, dtype=np.uint8, count=n, offset=offset).tolist()
     if any(c >= len(STATUS_LABELS) for c in codes):
@@ -159,13 +168,15 @@ def decode_binary(data: bytes, device: str = "", channels: list[str] | None = No
         "sequence": seq,
         "device": device,
         "host_time_s": host,
-        "device_time_s": _opt(dev_time),
+        "device_time_s": finite_or_none(dev_time),
         "up": all(STATUS_LABELS[c] != "stale" for c in codes),
         "total_force_n": total,
         "center_of_pressure_mm": None if math.isnan(cx) or math.isnan(cy) else [cx, cy],
         "contact_area_mm2": area,
         "channels_in_contact": contact,
         "channels": list(channels) if channels is not None else [str(i) for i in range(n)],
-        **values,
+        "force_n": values[0],
+        "force_static_n": values[1],
+        "resistance_ohm": values[2],
         "status": [STATUS_LABELS[c] for c in codes],
     }

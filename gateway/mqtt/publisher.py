@@ -34,6 +34,7 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 
 from ..config import GatewayConfig
 from ..config.mqtt import MqttConfig
+from ..runtime.frame import frame_of
 from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from .payload import encode_binary, encode_json, frame_dict
 
@@ -276,7 +277,7 @@ class MqttPublisher:
                 payload = json.dumps(meta_dict(config, device.name, self.settings.encoding))
                 self._client.publish(self.settings.topic(device.name, "meta"), payload, qos=1, retain=True)
         for name, seq, snap in batch:
-            frame = frame_dict(snap, seq)
+            frame = frame_dict(frame_of(snap), seq)  # built once per snapshot, shared with the page
             data = encode_binary(frame) if self.settings.encoding == "binary" else encode_json(frame)
             info = self._client.publish(self.settings.topic(name, "frame"), data, qos=self.settings.qos)
             with self._cond:

@@ -14,7 +14,9 @@ Pure (no I/O, no clocks: times are passed in). Per channel:
    keeps falling by creep. ``invert_static`` (no creep state) is kept for diagnostics: its
    error grows with hold time (about +10 % after 10 min at 2 N for the default sensor).
    It is evaluated when first asked for (``DeviceSnapshot.force_static_n``, e.g. at a
-   scrape), so the poll path pays for one inversion, not two. A channel whose calibration
+   scrape or by the MQTT frame), once, by that thread under the snapshot's lock, so the poll
+   path pays for one inversion, not two (bench/bench_gateway.py favours this over computing
+   it here: about 58 us more per 64-channel poll of about 113 us). A channel whose calibration
    gives a line or a lookup (``ChannelConfig.conversion``, ``gateway.model.conversion``) is
    read with it instead, statelessly (no creep state; its static estimate is its force).
    A channel read through a curve (``gateway.model.curves``) is tracked with its drift state.

@@ -5,18 +5,20 @@ resistance (ohm), drift-corrected force (N), status (``ChannelStatus``) and posi
 plus the array quantities (total force N, centre of pressure mm, contact area mm^2, peak
 channel). A ``GatewaySnapshot`` holds every device's snapshot and counters. Arrays are
 read-only; a value that is not a valid number is NaN, flagged by the status, and never
-reaches the metrics (``DeviceSnapshot.channels`` gives None instead).
+reaches the metrics or a frame: ``finite_or_none`` is the one NaN policy (None where a value is
+absent or not finite, optionally rounded) that ``DeviceSnapshot.channels``, the ``Frame``
+(``runtime.frame``) and through it the page's and MQTT's JSON use.
 """
 
 from __future__ import annotations
 
 import enum
-import functools
 import math
-from collections.abc import Iterable, Mapping
+import threading
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import TypeVar
+from typing import Generic, TypeVar, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -102,20 +104,52 @@ class ChannelView:
     reference_force_n: float | None
 
 
-def _opt(x: float | None) -> float | None:
-    return float(x) if x is not None and math.isfinite(x) else None
-
-
+@overload
+def finite_or_none(values: float | None, digits: int | None = None) -> float | None: ...
+@overload
 def finite_or_none(
     values: Iterable[float] | NDArray[np.float64], digits: int | None = None
-) -> list[float | None]:
-    """Values for JSON (the page's frames, MQTT frames): floats, rounded to ``digits``
-    decimals if given, None where absent or not finite (JSON has no NaN)."""
+) -> list[float | None]: ...
+def finite_or_none(
+    values: float | Iterable[float] | NDArray[np.float64] | None, digits: int | None = None
+) -> float | list[float | None] | None:
+    """The one NaN policy for what leaves a snapshot (frames, JSON, metrics): a value as a
+    float, rounded to ``digits`` decimals if given, or None where it is absent or not finite
+    (JSON has no NaN; a metric has no sample). One value gives one value (a numpy scalar is
+    a float); an array or iterable gives a list."""
+    if values is None or isinstance(values, (float, int, np.number)):
+        if values is None or not math.isfinite(values):
+            return None
+        return float(values) if digits is None else round(float(values), digits)
     raw = values.tolist() if isinstance(values, np.ndarray) else values
-    floats = [_opt(float(v)) for v in raw]
+    finite = math.isfinite
     if digits is None:
-        return floats
-    return [None if f is None else round(f, digits) for f in floats]
+        return [float(v) if finite(v) else None for v in raw]
+    return [round(float(v), digits) if finite(v) else None for v in raw]
+
+
+_T = TypeVar("_T")
+
+
+class Once(Generic[_T]):
+    """A value computed at most once, by the first thread that asks for it: the others
+    wait on the lock for that one computation and then share its result. The fast path
+    (already computed) takes no lock: the value is stored before the flag is set."""
+
+    __slots__ = ("_done", "_lock", "_value")
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._done = False
+        self._value: _T | None = None
+
+    def get(self, compute: Callable[[], _T]) -> _T:
+        if not self._done:
+            with self._lock:
+                if not self._done:
+                    self._value = compute()
+                    self._done = True
+        return self._value  # type: ignore[return-value]
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,6 +183,17 @@ class DeviceSnapshot:
     Arrays have one entry per enabled channel (``channel_index`` holds the device index);
     NaN marks an absent value (see ``status``). Forces in N, resistances in ohm, positions
     and centre of pressure in mm, contact area in mm^2, times in s.
+
+    Derived values are computed on first use, explicitly lazy and thread-safe: the static
+    force (``force_static_n``: the model's inversion without creep state, a diagnostic about
+    half as costly as the poll's whole conversion, so the poll path does not pay for it:
+    58 us on top of 113 us per 64-channel poll of bench/bench_gateway.py) and, through
+    ``derived``, the ``Frame`` (``runtime.frame.frame_of``: the one typed frame the page, the
+    stream and MQTT encode). Each is computed by exactly one thread, the first that asks (a
+    scrape, the web server's loop or the MQTT thread), under a lock of its own (``Once``); a
+    thread asking meanwhile waits for that one computation, and every reader gets the same
+    read-only result. No field changes after construction (a copy made with
+    ``dataclasses.replace`` computes its own).
     """
 
     device: str
@@ -181,18 +226,35 @@ class DeviceSnapshot:
     #: False only for the placeholder a device is listed with before its first poll completes
     #: (no observation: the stream and MQTT publish nothing for it; a failed poll is True)
     polled: bool = True
+    _static: Once[FloatArray] = field(default_factory=Once, init=False, repr=False, compare=False)
+    _derived: dict[object, Once[object]] = field(default_factory=dict, init=False, repr=False, compare=False)
+    _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False, compare=False)
 
     @property
     def n_channels(self) -> int:
         return len(self.channel_names)
 
-    @functools.cached_property
+    @property
     def force_static_n(self) -> FloatArray:
-        """Force by static inversion (no creep state), N; NaN where absent. A diagnostic,
-        so it is computed on first use (e.g. a scrape), not at every poll."""
+        """Force by static inversion (no creep state), N; NaN where absent (read-only). A
+        diagnostic, so it is computed on first use (e.g. a scrape), not at every poll, once,
+        by whichever thread asks first (see the class docstring)."""
+        return self._static.get(self._evaluate_static)
+
+    def _evaluate_static(self) -> FloatArray:
         if self.static_estimate is None:
             return read_only(np.full(self.n_channels, np.nan))
         return self.static_estimate.evaluate()
+
+    def derived(self, compute: Callable[[DeviceSnapshot], _T]) -> _T:
+        """``compute(self)``, computed once by whichever thread asks first and then shared
+        (``runtime.frame.frame_of``: the one ``Frame`` of this poll). ``compute`` must be the
+        same function object at every call (a module-level function), as it is the key."""
+        cell = self._derived.get(compute)
+        if cell is None:
+            with self._lock:
+                cell = self._derived.setdefault(compute, Once())
+        return cell.get(lambda: compute(self))  # type: ignore[return-value]
 
     def channels(self) -> list[ChannelView]:
         return [
@@ -202,10 +264,10 @@ class DeviceSnapshot:
                 x_mm=float(self.x_mm[k]),
                 y_mm=float(self.y_mm[k]),
                 status=ChannelStatus(int(self.status[k])),
-                resistance_ohm=_opt(float(self.resistance_ohm[k])),
-                force_n=_opt(float(self.force_n[k])),
-                force_static_n=_opt(float(self.force_static_n[k])),
-                reference_force_n=_opt(float(self.reference_force_n[k])),
+                resistance_ohm=finite_or_none(float(self.resistance_ohm[k])),
+                force_n=finite_or_none(float(self.force_n[k])),
+                force_static_n=finite_or_none(float(self.force_static_n[k])),
+                reference_force_n=finite_or_none(float(self.reference_force_n[k])),
             )
             for k in range(self.n_channels)
         ]

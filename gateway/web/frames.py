@@ -3,8 +3,10 @@
 ``layout_json`` describes a device once (channel names and positions in mm, units, the
 status codes' labels); ``encode_frame`` turns one ``DeviceSnapshot`` into the bytes of one
 frame (forces in N and status codes per channel in layout order, the array quantities, the
-device's health counters). A value that is not a finite number is ``null``, never NaN, so
-every frame is strict JSON. Frames are encoded once per poll and shared by every client.
+device's health counters). A frame is a view of the snapshot's one ``Frame``
+(``runtime.frame``, shared with MQTT): a value that is not a finite number is ``null``, never
+NaN (``finite_or_none``, the one NaN policy), so every frame is strict JSON. Frames are
+encoded once per poll and shared by every client.
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ import itertools
 import json
 import math
 from collections.abc import Iterable, Sequence
-from typing import Any, Protocol
+from typing import Any, Protocol, TypedDict
 
 from ..runtime.counters import DeviceCounters
+from ..runtime.frame import DECIMALS, Frame, frame_of
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
 #: Units of every quantity in the API, as listed with each device.
@@ -27,25 +30,30 @@ UNITS: dict[str, str] = {
 }
 
 
-def num(x: float | None, digits: int = 6) -> float | None:
-    """``x`` rounded to ``digits`` decimals, or None where it is absent or not finite."""
-    if x is None:
-        return None
-    x = float(x)
-    return round(x, digits) if math.isfinite(x) else None
+class PageFrame(TypedDict):
+    """One frame as the page and the stream read it (``docs/web.md``), in this order: times
+    in s (``t`` the host's Unix time), forces in N, ``cop_mm`` the centre of pressure (x, y)
+    in mm, ``status`` the ``ChannelStatus`` codes (the layout's ``status_labels`` name them)."""
 
-
-def num_list(values: Iterable[float], digits: int = 6) -> list[float | None]:
-    return finite_or_none(values, digits)
-
-
-def _channel(dev: DeviceSnapshot, k: int) -> dict[str, Any]:
-    return {
-        "index": int(dev.channel_index[k]),
-        "name": dev.channel_names[k],
-        "x_mm": num(float(dev.x_mm[k])),
-        "y_mm": num(float(dev.y_mm[k])),
-    }
+    device: str
+    seq: int
+    t: float
+    device_time_s: float | None
+    last_success_t: float | None
+    up: bool
+    error: str | None
+    force_n: list[float | None]
+    status: list[int]
+    total_force_n: float
+    cop_mm: list[float] | None
+    contact_area_mm2: float
+    channels_in_contact: int
+    peak_channel: str | None
+    peak_force_n: float | None
+    poll_interval_s: float
+    polls_total: int
+    reads_total: int
+    read_errors_total: int
 
 
 def cell_area_from_positions(x_mm: Iterable[float], y_mm: Iterable[float]) -> float | None:
@@ -108,7 +116,12 @@ def layout_json(
     if config is not None:
         area: float | None = config.layout.cell_area_mm2
         disabled: list[dict[str, Any]] | None = [
-            {"index": ch.index, "name": ch.name, "x_mm": num(ch.x_mm), "y_mm": num(ch.y_mm)}
+            {
+                "index": ch.index,
+                "name": ch.name,
+                "x_mm": finite_or_none(ch.x_mm, DECIMALS),
+                "y_mm": finite_or_none(ch.y_mm, DECIMALS),
+            }
             for ch in config.channels
             if not ch.enabled
         ]
@@ -117,46 +130,57 @@ def layout_json(
     return {
         "name": dev.device,
         "bus": dev.bus,
-        "poll_interval_s": num(dev.poll_interval_s),
+        "poll_interval_s": finite_or_none(dev.poll_interval_s, DECIMALS),
         "units": {**UNITS, "pressure": "kPa"},
         "status_labels": list(STATUS_LABELS),
         "scale_n": [0.0, float(scale_max_n)],
-        "cell_area_mm2": num(area),
-        "channels": [_channel(dev, k) for k in range(dev.n_channels)],
+        "cell_area_mm2": finite_or_none(area, DECIMALS),
+        "channels": [
+            {"index": int(index), "name": name, "x_mm": x, "y_mm": y}
+            for index, name, x, y in zip(
+                dev.channel_index.tolist(),
+                dev.channel_names,
+                finite_or_none(dev.x_mm, DECIMALS),
+                finite_or_none(dev.y_mm, DECIMALS),
+                strict=True,
+            )
+        ],
         "disabled_channels": disabled,
     }
 
 
-def frame_json(dev: DeviceSnapshot, seq: int, counters: DeviceCounters | None) -> dict[str, Any]:
-    """One poll of one device as a JSON-ready mapping (see ``encode_frame``)."""
-    cop = dev.center_of_pressure_mm
+def frame_json(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounters | None) -> PageFrame:
+    """One poll of one device as the page's JSON-ready mapping (see ``encode_frame``): a view
+    of the snapshot's shared ``Frame`` with the hub's ``seq`` and the device's counters."""
+    f = frame_of(source) if isinstance(source, DeviceSnapshot) else source
+    cop = f.center_of_pressure_mm
     c = counters or DeviceCounters()
     return {
-        "device": dev.device,
+        "device": f.device,
         "seq": seq,
-        "t": num(dev.timestamp_s),
-        "device_time_s": num(dev.device_time_s),
-        "last_success_t": num(dev.last_success_timestamp_s),
-        "up": dev.up,
-        "error": dev.error,
-        "force_n": num_list(dev.force_n),
-        "status": [int(s) for s in dev.status],
-        "total_force_n": num(dev.total_force_n),
-        "cop_mm": None if cop is None else [num(cop[0]), num(cop[1])],
-        "contact_area_mm2": num(dev.contact_area_mm2),
-        "channels_in_contact": dev.channels_in_contact,
-        "peak_channel": dev.peak_channel,
-        "peak_force_n": num(dev.peak_force_n),
-        "poll_interval_s": num(dev.poll_interval_s),
+        "t": f.host_time_s,
+        "device_time_s": f.device_time_s,
+        "last_success_t": f.last_success_time_s,
+        "up": f.up,
+        "error": f.error,
+        "force_n": list(f.force_n),
+        "status": [int(s) for s in f.status],
+        "total_force_n": f.total_force_n,
+        "cop_mm": None if cop is None else [cop[0], cop[1]],
+        "contact_area_mm2": f.contact_area_mm2,
+        "channels_in_contact": f.channels_in_contact,
+        "peak_channel": f.peak_channel,
+        "peak_force_n": f.peak_force_n,
+        "poll_interval_s": f.poll_interval_s,
         "polls_total": c.polls_total,
         "reads_total": c.reads_total,
         "read_errors_total": sum(c.read_errors_total.values()),
     }
 
 
-def encode_frame(dev: DeviceSnapshot, seq: int, counters: DeviceCounters | None) -> bytes:
+def encode_frame(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounters | None) -> bytes:
     """The compact UTF-8 JSON of one frame: an object starting with ``{"device":``."""
-    return json.dumps(frame_json(dev, seq, counters), separators=(",", ":"), allow_nan=False).encode()
+    return json.dumps(frame_json(source, seq, counters), separators=(",", ":"), allow_nan=False).encode()
 
 
 def with_dropped(frame: bytes, dropped: int) -> bytes:

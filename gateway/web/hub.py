@@ -6,8 +6,9 @@ device sequence from 1) and hands it to the server's loop through a bounded inbo
 that loop at most once per batch. A device's placeholder before its first poll completes
 (``DeviceSnapshot.polled`` false) is listed with ``seq`` 0 but is not a frame: nothing is
 sent for a device until a poll of it has completed (a failed first poll is sent, ``up``
-false). In the server's loop ``drain`` encodes each frame once and
-offers it to the clients:
+false). In the server's loop ``drain`` encodes each frame once (a view of the snapshot's
+shared ``Frame``, which MQTT encodes too: whichever needs it first builds it) and offers it
+to the clients:
 
 * ``StreamQueue``: every frame of one device for a program, bounded; when full the oldest
   frame is dropped and counted, so a client that falls behind sees a gap in ``seq`` and the
@@ -29,6 +30,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..runtime.counters import DeviceCounters
+from ..runtime.frame import frame_of
 from ..runtime.poller import SnapshotHolder
 from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from .frames import encode_frame
@@ -208,7 +210,7 @@ class FrameHub:
             self._inbox.clear()
             self._wake_pending = False
         for name, entry in batch:
-            frame = encode_frame(entry.snapshot, entry.seq, entry.counters)
+            frame = encode_frame(frame_of(entry.snapshot), entry.seq, entry.counters)
             for q in self._streams.get(name, ()):
                 lost = q.offer(entry.seq, frame)
                 if lost:

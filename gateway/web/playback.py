@@ -3,9 +3,10 @@
 The web layer does not read records (that is analysis): the command replays the record
 through the runtime's processor and hands the resulting ``DeviceSnapshot``s here, one per
 device sample in time order. ``playback_frames`` encodes them as the live page's frames
-(``frames.frame_json``, the same shape, so ``app.js`` draws them with the same code), each
-with one more member, ``reference_total_force_n``: the sum of the record's reference forces
-at that sample (N; ``null`` when the record has no ``force_n`` column).
+(``frames.frame_json`` of each snapshot's ``Frame``, the same shape, so ``app.js`` draws
+them with the same code), each with one more member, ``reference_total_force_n``: the sum
+of the record's reference forces at that sample (N; ``null`` when the record has no
+``force_n`` column).
 
 ``PlaybackPage(playback).install(app)`` serves:
 
@@ -30,12 +31,19 @@ from typing import Any
 
 from aiohttp import web
 
-from ..runtime.snapshot import DeviceSnapshot
+from ..runtime.frame import DECIMALS
+from ..runtime.snapshot import DeviceSnapshot, finite_or_none
 from .app import CSP, STATIC_FILES
-from .frames import DeviceDescription, frame_json, layout_json, num
+from .frames import DeviceDescription, PageFrame, frame_json, layout_json
 
 #: The most frames a playback sends to the page (about 12 MB of JSON for 16 channels).
 MAX_FRAMES = 20_000
+
+
+class PlaybackFrame(PageFrame):
+    """A live page's frame with the record's reference total force (N; None: no reference)."""
+
+    reference_total_force_n: float | None
 
 
 @dataclass(frozen=True)
@@ -44,7 +52,7 @@ class Playback:
     frames in time order, the record's time span (s) and whether it has a reference force."""
 
     layout: dict[str, Any]
-    frames: list[dict[str, Any]]
+    frames: list[PlaybackFrame]
     start_s: float
     end_s: float
     has_reference: bool
@@ -86,12 +94,11 @@ def playback_frames(
     names = {s.device for s in snapshots}
     if len(names) != 1:
         raise ValueError(f"one device per playback, got {sorted(names)}")
-    frames: list[dict[str, Any]] = []
+    frames: list[PlaybackFrame] = []
     for seq, k in enumerate(thin(len(snapshots), max_frames), start=1):
         snap = snapshots[k]
-        frame = frame_json(snap, seq, None)
-        frame["reference_total_force_n"] = num(reference_total_n(snap)) if has_reference else None
-        frames.append(frame)
+        reference = finite_or_none(reference_total_n(snap), DECIMALS) if has_reference else None
+        frames.append({**frame_json(snap, seq, None), "reference_total_force_n": reference})
     first, last = snapshots[0].timestamp_s, snapshots[-1].timestamp_s
     layout = layout_json(snapshots[0], scale_max_n, config)
     return Playback(layout, frames, float(first), float(last), has_reference, source, len(snapshots))
@@ -110,8 +117,8 @@ class PlaybackPage:
         p = playback
         self._summary = {
             "source": p.source,
-            "start_s": num(p.start_s),
-            "end_s": num(p.end_s),
+            "start_s": finite_or_none(p.start_s, DECIMALS),
+            "end_s": finite_or_none(p.end_s, DECIMALS),
             "n_frames": len(p.frames),
             "samples_total": p.samples_total,
             "has_reference": p.has_reference,

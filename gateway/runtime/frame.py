@@ -1,0 +1,90 @@
+"""The one typed frame of a device poll, as the page, the stream and MQTT publish it.
+
+A ``Frame`` is what leaves the gateway of one ``DeviceSnapshot``: every value already in
+its published form, a float rounded to ``DECIMALS`` (6) decimals or None where absent or not
+finite (``snapshot.finite_or_none``, the one NaN policy), per channel in the order of the
+enabled channels. It is built once per snapshot (``frame_of``, by whichever thread needs it
+first: ``DeviceSnapshot.derived``) and shared; the encodings are views of it: ``web.frames`` (the page's
+and the stream's JSON: ``t``, ``cop_mm``, status codes, with the hub's sequence number and
+the device's counters) and ``mqtt.payload`` (``docs/mqtt.md``'s JSON and binary layout:
+``host_time_s``, ``center_of_pressure_mm``, status labels, with the publisher's sequence).
+
+Six decimals: 1 µN, 1 µΩ, 1 µs, 1 µm² and 1 nm are far below what a tactile channel or a
+clock resolves, and no binary float noise (``15.620000000000001``) reaches a client. Rounding
+to decimals, not to significant digits, keeps the Unix time to the microsecond.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+from .snapshot import ChannelStatus, DeviceSnapshot, finite_or_none
+
+__all__ = ["DECIMALS", "Frame", "frame_of"]
+
+#: Decimals of every published float.
+DECIMALS: Final = 6
+
+_STATUSES: Final = tuple(ChannelStatus)
+
+
+def _rounded(x: float) -> float:
+    return round(float(x), DECIMALS)
+
+
+@dataclass(frozen=True, eq=True)
+class Frame:
+    """One poll of one device as published (immutable; absent values None, never NaN).
+
+    Per-channel tuples have one entry per enabled channel, named by ``channel_names``.
+    """
+
+    device: str
+    up: bool  # False: the poll failed (every channel stale, values the last ones)
+    error: str | None  # why the poll failed
+    host_time_s: float  # wall clock of the poll (Unix time)
+    device_time_s: float | None  # device clock at the last good poll
+    last_success_time_s: float | None  # wall clock of the last good poll (Unix time)
+    poll_interval_s: float
+    channel_names: tuple[str, ...]
+    force_n: tuple[float | None, ...]  # drift-corrected force
+    force_static_n: tuple[float | None, ...]  # static inversion (no creep state)
+    resistance_ohm: tuple[float | None, ...]
+    status: tuple[ChannelStatus, ...]
+    total_force_n: float
+    center_of_pressure_mm: tuple[float, float] | None  # (x, y); None: nothing in contact
+    contact_area_mm2: float
+    channels_in_contact: int
+    peak_channel: str | None
+    peak_force_n: float | None
+
+    @classmethod
+    def of(cls, snap: DeviceSnapshot) -> Frame:
+        """The frame of ``snap``, built anew (``frame_of`` builds it once and shares it)."""
+        cop = snap.center_of_pressure_mm
+        return cls(
+            device=snap.device,
+            up=bool(snap.up),
+            error=snap.error,
+            host_time_s=_rounded(snap.timestamp_s),
+            device_time_s=finite_or_none(snap.device_time_s, DECIMALS),
+            last_success_time_s=finite_or_none(snap.last_success_timestamp_s, DECIMALS),
+            poll_interval_s=_rounded(snap.poll_interval_s),
+            channel_names=tuple(snap.channel_names),
+            force_n=tuple(finite_or_none(snap.force_n, DECIMALS)),
+            force_static_n=tuple(finite_or_none(snap.force_static_n, DECIMALS)),
+            resistance_ohm=tuple(finite_or_none(snap.resistance_ohm, DECIMALS)),
+            status=tuple(_STATUSES[s] for s in snap.status.tolist()),
+            total_force_n=_rounded(snap.total_force_n),
+            center_of_pressure_mm=None if cop is None else (_rounded(cop[0]), _rounded(cop[1])),
+            contact_area_mm2=_rounded(snap.contact_area_mm2),
+            channels_in_contact=int(snap.channels_in_contact),
+            peak_channel=snap.peak_channel,
+            peak_force_n=finite_or_none(snap.peak_force_n, DECIMALS),
+        )
+
+
+def frame_of(snap: DeviceSnapshot) -> Frame:
+    """The one ``Frame`` of ``snap``: built by the first thread that asks, then shared."""
+    return snap.derived(Frame.of)
