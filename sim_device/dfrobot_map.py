@@ -10,7 +10,6 @@ mapped. Imports nothing of ``gateway``.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import math
 import random
@@ -18,8 +17,9 @@ import time
 from collections.abc import AsyncIterator, Sequence
 
 from pymodbus.constants import ExcCodes
-from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
+
+from .modbus_server import serve_device_tcp
 
 VID = PID = 0x3343
 FRAME_ADDRESS, CELLS, COLUMNS = 7, 36, 6
@@ -92,17 +92,5 @@ async def serve_dfrobot_tcp(
     board: DFRobotBoard | None = None, host: str = "127.0.0.1", port: int = 0, device_id: int = 1
 ) -> AsyncIterator[int]:
     """Serve the board over Modbus TCP until the block ends; yields the bound port."""
-    server = ModbusTcpServer((board or DFRobotBoard()).device(device_id), address=(host, port))
-    await server.serve_forever(background=True)
-    listener = server.transport
-    try:
-        yield int(listener.sockets[0].getsockname()[1])  # type: ignore[attr-defined]
-    finally:
-        for handler in list(server.active_connections.values()):
-            if handler.transport is not None:
-                handler.transport.abort()  # type: ignore[attr-defined]
-        await server.shutdown()
-        if isinstance(listener, asyncio.AbstractServer):
-            await asyncio.wait_for(listener.wait_closed(), timeout=5.0)
-        for _ in range(3):
-            await asyncio.sleep(0)
+    async with serve_device_tcp((board or DFRobotBoard()).device(device_id), host, port) as bound:
+        yield bound

@@ -420,7 +420,15 @@ async def serve_static_tcp(
     n_channels: int, host: str = "127.0.0.1", port: int = 0, device_id: int = 1
 ) -> AsyncIterator[int]:
     """A bare pymodbus server with the same register layout and static values; yields the port."""
-    server = ModbusTcpServer(static_device(n_channels, device_id), address=(host, port))
+    async with serve_device_tcp(static_device(n_channels, device_id), host, port) as bound:
+        yield bound
+
+
+@contextlib.asynccontextmanager
+async def serve_device_tcp(device: SimDevice, host: str = "127.0.0.1", port: int = 0) -> AsyncIterator[int]:
+    """Any pymodbus ``SimDevice`` over Modbus TCP until the block ends; yields the bound port
+    (port 0: an ephemeral one). Its connections are dropped and the listener closed on exit."""
+    server = ModbusTcpServer(device, address=(host, port))
     await _start(server, f"{host}:{port}")
     listener = server.transport
     try:

@@ -60,6 +60,39 @@ def _json(data: Any, status: int = 200) -> web.Response:
     return web.Response(status=status, body=body, headers={"Content-Type": "application/json"})
 
 
+class PageFiles:
+    """The page's static files (``STATIC_FILES``, read once) at ``/`` and ``/static/...``, and
+    the security headers of every response but ``/metrics`` (the live page and playback)."""
+
+    def __init__(self) -> None:
+        self._files = {name: resources.files(__package__).joinpath("static", name).read_bytes()
+                       for name in STATIC_FILES}  # fmt: skip
+
+    def install(self, app: web.Application) -> None:
+        app.router.add_get("/", self._index)
+        app.router.add_get("/static/{file}", self._static)
+        app.on_response_prepare.append(self._policy)
+
+    async def _policy(self, request: web.Request, response: web.StreamResponse) -> None:
+        if request.path != "/metrics":
+            response.headers["Content-Security-Policy"] = CSP
+            response.headers["X-Content-Type-Options"] = "nosniff"
+            response.headers.setdefault("Referrer-Policy", "no-referrer")
+
+    def _file(self, name: str) -> web.Response:
+        return web.Response(body=self._files[name], headers={"Content-Type": STATIC_FILES[name],
+                                                             "Cache-Control": "no-cache"})  # fmt: skip
+
+    async def _index(self, request: web.Request) -> web.Response:
+        return self._file("index.html")
+
+    async def _static(self, request: web.Request) -> web.Response:
+        name = request.match_info["file"]
+        if name not in STATIC_FILES:
+            raise web.HTTPNotFound()
+        return self._file(name)
+
+
 class WebPage:
     """The pressure-map page and its API over a ``FrameHub``."""
 
@@ -87,13 +120,11 @@ class WebPage:
         self.max_fps = max_fps
         self.scale_max_n = scale_max_n
         self._clock = clock
-        self._files = {name: resources.files(__package__).joinpath("static", name).read_bytes()
-                       for name in STATIC_FILES}  # fmt: skip
+        self.files = PageFiles()
 
     def install(self, app: web.Application) -> None:
         r = app.router
-        r.add_get("/", self._index)
-        r.add_get("/static/{file}", self._static)
+        self.files.install(app)
         r.add_get("/api/devices", self._devices)
         r.add_get("/api/devices/{name}", self._device)
         r.add_get("/api/devices/{name}/frame", self._frame)
@@ -102,7 +133,6 @@ class WebPage:
         app.on_startup.append(self._attach)
         app.on_shutdown.append(self._close)
         app.on_cleanup.append(self._detach)
-        app.on_response_prepare.append(self._policy)
 
     # ------------------------------------------------------------------ lifecycle
     async def _attach(self, app: web.Application) -> None:
@@ -113,26 +143,6 @@ class WebPage:
 
     async def _detach(self, app: web.Application) -> None:
         self.hub.detach()
-
-    async def _policy(self, request: web.Request, response: web.StreamResponse) -> None:
-        if request.path != "/metrics":
-            response.headers["Content-Security-Policy"] = CSP
-            response.headers["X-Content-Type-Options"] = "nosniff"
-            response.headers.setdefault("Referrer-Policy", "no-referrer")
-
-    # ------------------------------------------------------------------ page
-    def _file(self, name: str) -> web.Response:
-        return web.Response(body=self._files[name], headers={"Content-Type": STATIC_FILES[name],
-                                                             "Cache-Control": "no-cache"})  # fmt: skip
-
-    async def _index(self, request: web.Request) -> web.Response:
-        return self._file("index.html")
-
-    async def _static(self, request: web.Request) -> web.Response:
-        name = request.match_info["file"]
-        if name not in STATIC_FILES:
-            raise web.HTTPNotFound()
-        return self._file(name)
 
     # ------------------------------------------------------------------ API
     def _describe(self, name: str) -> dict[str, Any] | None:

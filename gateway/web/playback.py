@@ -26,14 +26,13 @@ import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from importlib import resources
 from typing import Any
 
 from aiohttp import web
 
 from ..runtime.frame import DECIMALS
 from ..runtime.snapshot import DeviceSnapshot, finite_or_none
-from .app import CSP, STATIC_FILES
+from .app import PageFiles
 from .frames import DeviceDescription, PageFrame, frame_json, layout_json
 
 #: The most frames a playback sends to the page (about 12 MB of JSON for 16 channels).
@@ -129,36 +128,14 @@ class PlaybackPage:
         self._entry = entry
         body = {**self._summary, "device": p.layout["name"], "frames": p.frames}
         self._frames_body = json.dumps(body, separators=(",", ":"), allow_nan=False).encode()
-        self._files = {name: resources.files(__package__).joinpath("static", name).read_bytes()
-                       for name in STATIC_FILES}  # fmt: skip
+        self.files = PageFiles()
 
     def install(self, app: web.Application) -> None:
         r = app.router
-        r.add_get("/", self._index)
-        r.add_get("/static/{file}", self._static)
+        self.files.install(app)
         r.add_get("/api/devices", self._devices)
         r.add_get("/api/devices/{name}", self._device)
         r.add_get("/api/playback", self._frames)
-        app.on_response_prepare.append(self._policy)
-
-    async def _policy(self, request: web.Request, response: web.StreamResponse) -> None:
-        if request.path != "/metrics":
-            response.headers["Content-Security-Policy"] = CSP
-            response.headers["X-Content-Type-Options"] = "nosniff"
-            response.headers.setdefault("Referrer-Policy", "no-referrer")
-
-    def _file(self, name: str) -> web.Response:
-        return web.Response(body=self._files[name], headers={"Content-Type": STATIC_FILES[name],
-                                                             "Cache-Control": "no-cache"})  # fmt: skip
-
-    async def _index(self, request: web.Request) -> web.Response:
-        return self._file("index.html")
-
-    async def _static(self, request: web.Request) -> web.Response:
-        name = request.match_info["file"]
-        if name not in STATIC_FILES:
-            raise web.HTTPNotFound()
-        return self._file(name)
 
     async def _devices(self, request: web.Request) -> web.Response:
         return _json({

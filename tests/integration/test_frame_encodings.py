@@ -7,17 +7,15 @@ computed here."""
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
-from collections.abc import AsyncIterator
 
 import pytest
-from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from gateway.config import GatewayConfig, parse_config
 from gateway.runtime.sampler import sample_device
 from sim_device.encodings import encode
+from sim_device.modbus_server import serve_device_tcp
 
 #: raw values per type (the extremes of the integer types included), and a scale and offset
 CASES: dict[str, tuple[list[float], float, float]] = {
@@ -34,23 +32,11 @@ WIDTH = {"uint16": 1, "int16": 1, "uint32": 2, "int32": 2, "float32": 2, "float6
 LAYOUT = {(t, o): 16 * k for k, (t, o) in enumerate((t, o) for t in CASES for o in ORDERS)}
 
 
-@contextlib.asynccontextmanager
-async def serve(registers: list[int]) -> AsyncIterator[int]:
+def serve(registers: list[int]) -> contextlib.AbstractAsyncContextManager[int]:
     """The same registers as holding and input registers of device 1, over Modbus TCP."""
     table = [SimData(0, values=registers, datatype=DataType.REGISTERS)]
     bits = [SimData(0, count=16, values=False, datatype=DataType.BITS)]
-    server = ModbusTcpServer(SimDevice(id=1, simdata=(bits, bits, table, table)), address=("127.0.0.1", 0))
-    await server.serve_forever(background=True)
-    listener = server.transport
-    try:
-        yield int(listener.sockets[0].getsockname()[1])  # type: ignore[attr-defined]
-    finally:
-        for handler in list(server.active_connections.values()):
-            if handler.transport is not None:
-                handler.transport.abort()  # type: ignore[attr-defined]
-        await server.shutdown()
-        if isinstance(listener, asyncio.AbstractServer):
-            await asyncio.wait_for(listener.wait_closed(), timeout=5.0)
+    return serve_device_tcp(SimDevice(id=1, simdata=(bits, bits, table, table)))
 
 
 def image() -> list[int]:
@@ -63,37 +49,9 @@ def image() -> list[int]:
 
 def device_config(port: int, value_type: str, order: str, table: str) -> GatewayConfig:
     _, scale, offset = CASES[value_type]
-    return parse_config(f"""
-[[bus]]
-name = "line"
-kind = "tcp"
-host = "127.0.0.1"
-port = {port}
-timeout_s = 2.0
-
-[[bus.device]]
-name = "arr"
-device_id = 1
-channels = 4
-columns = 2
-pitch_mm = 2.5
-
-[bus.device.front_end]
-kind = "high_side"
-reference_ohm = 10000.0
-supply_v = 3.3
-adc_reference_v = 3.3
-adc_bits = 16
-
-[bus.device.frame]
-quantity = "counts"
-type = "{value_type}"
-order = "{order}"
-scale = {scale!r}
-offset = {offset!r}
-table = "{table}"
-address = {LAYOUT[(value_type, order)]}
-""")
+    address = LAYOUT[(value_type, order)]
+    frame = f'type = "{value_type}"\norder = "{order}"\nscale = {scale!r}\noffset = {offset!r}\n'
+    return parse_config(_frame_text(port, frame + f'table = "{table}"\naddress = {address}'))
 
 
 async def test_every_type_and_order_round_trips_through_a_simulated_device() -> None:
