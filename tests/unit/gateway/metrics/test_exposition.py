@@ -1,8 +1,11 @@
-"""The directly written exposition equals, byte for byte, what the client library makes of the
-collector, for snapshots with every kind of value, and ``promtool`` accepts it."""
+"""The two writers of the table of families agree: the directly written exposition equals, byte
+for byte, what the client library makes of the collector, for snapshots with every kind of value,
+every family of the table is in both with the same samples, and ``promtool`` accepts it. (The
+values themselves are checked against known numbers in ``test_families.py``.)"""
 
 from __future__ import annotations
 
+import math
 import re
 import shutil
 import subprocess
@@ -14,10 +17,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from prometheus_client import CollectorRegistry, generate_latest
+from prometheus_client.parser import text_string_to_metric_families
 
 from gateway.config import device_config_for
 from gateway.metrics.collector import make_registry
 from gateway.metrics.exposition import SnapshotExposition, render
+from gateway.metrics.families import FAMILIES
 from gateway.modbus.image import RawSample
 from gateway.model import SensorParams
 from gateway.runtime.counters import Tally
@@ -76,6 +81,26 @@ def _snapshot(seed: int, n_devices: int, names: list[str]) -> GatewaySnapshot:
 def test_the_bytes_equal_the_client_library_s(seed: int, n_devices: int, names: list[str]) -> None:
     snap = _snapshot(seed, n_devices, names)
     assert render(snap).encode() == _reference(snap)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_devices=st.integers(0, 4))
+def test_every_family_of_the_table_is_in_both_with_the_same_samples(seed: int, n_devices: int) -> None:
+    snap = _snapshot(seed, n_devices, ["arr"])
+    direct = {f.name: f for f in text_string_to_metric_families(render(snap))}
+    library = {f.name: f for f in text_string_to_metric_families(_reference(snap).decode())}
+    assert list(direct) == list(library) == [f.family_name for f in FAMILIES]
+    for family in FAMILIES:
+        mine, theirs = direct[family.family_name], library[family.family_name]
+        assert (
+            (mine.type, mine.documentation)
+            == (theirs.type, theirs.documentation)
+            == (family.type, family.help)
+        )
+        assert mine.samples == theirs.samples, family.name
+        for sample in mine.samples:
+            assert set(sample.labels) - {"le"} == set(family.labels), (family.name, sample)
+            assert math.isfinite(sample.value), (family.name, sample)
 
 
 def test_an_empty_gateway_and_the_cache() -> None:
