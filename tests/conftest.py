@@ -28,6 +28,43 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 #: How long a thread or process that is shutting down may take to be gone (s).
 GRACE_S = 5.0
 
+TESTS = Path(__file__).resolve().parent
+
+#: Tests outside tests/integration (whose conftest marks its own) that take over ~2 s, by
+#: module or by ``module::function`` (every parameter of it), so that ``make test-fast``
+#: (``pytest -m "not slow"``) leaves them out without edits to their files. Measured with
+#: ``--durations`` on the 2-core machine, 2026-11-25.
+SLOW: frozenset[str] = frozenset(
+    {
+        "docs/test_docs_run.py",  # runs the docs' commands as printed (4-42 s each)
+        "fuzz/test_fuzz_modbus_wrong_answers.py",  # at least 3 s of wrong answers
+        "fuzz/test_fuzz_register_decoding.py::test_fuzz_decode_sample_and_the_processor",
+        "fuzz/test_fuzz_config_parser.py::test_fuzz_valid_document_with_random_edits",
+        "unit/gateway/analysis/test_discrepancy.py",  # 13 of its 16 tests fit models for 2-15 s
+        "unit/gateway/analysis/test_discrepancy_unexplained.py",
+        "unit/gateway/analysis/test_fsr_emulator_acceptance.py",
+        "unit/gateway/analysis/test_interval_coverage.py",
+        "unit/gateway/analysis/test_calibration.py::test_calibrate_cli_json_and_file",
+        "unit/gateway/analysis/test_calibration.py::test_round_trip_calibration_reads_another_record_within_a_tenth_of_a_newton",
+        "unit/gateway/analysis/test_real_records.py::test_every_real_calibration_reports_model_and_line_on_the_same_held_out_rows",
+        "unit/gateway/analysis/test_real_records.py::test_measured_numbers_on_the_real_files",
+        "unit/gateway/config/test_calibration_conversions.py::test_calibrate_model_line_file_reads_through_the_processor",
+    }
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark the tests of SLOW slow (tests/integration/conftest.py marks that directory)."""
+    slow = pytest.mark.slow
+    for item in items:
+        path = Path(str(item.path))
+        if not path.is_relative_to(TESTS):
+            continue
+        module = path.relative_to(TESTS).as_posix()
+        function = getattr(item, "originalname", item.name)
+        if module in SLOW or f"{module}::{function}" in SLOW:
+            item.add_marker(slow)
+
 
 def _children() -> set[int]:
     """Live child processes of this process (zombies not yet reaped count as live)."""

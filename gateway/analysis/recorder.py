@@ -22,7 +22,7 @@ from ..config import GatewayConfig
 from ..runtime.snapshot import VALUED_STATUSES, ChannelStatus, GatewaySnapshot
 from .records import REQUIRED_COLUMNS, RecordWriter
 
-#: the statuses whose row keeps its value: ok, no_contact, saturated, extrapolated
+#: the statuses whose row keeps its value: ok, no_contact, saturated, extrapolated, no_zero
 _WITH_VALUE = {int(s) for s in VALUED_STATUSES}
 _OPEN = int(ChannelStatus.OPEN)
 

@@ -17,8 +17,9 @@ unloaded array, naming the real cause first, with numbers:
 * MOVING: the mean of the last third of a channel's polls differs from the first third's by
   more than ``max(DRIFT_FLOOR, 4 standard errors)`` (counts, or ``DRIFT_FLOOR_REL`` of the
   reading in ohm; the standard error from the scatter within the two thirds, so a step reads
-  as a drift, not as noise): creep after a load was lifted, a hand still on the array; the message gives
-  the drift over the window and per second;
+  as a drift, not as noise; a sample a device repeats between its frame updates counts
+  once): creep after a load was lifted, a hand still on the array; the message gives the
+  drift over the window and per second;
 * NOISY: a channel's standard deviation exceeds ``max_noise_counts`` (counts), or
   ``max_noise_rel`` of the reading (ohm); only this message suggests wiring or shielding.
 """
@@ -193,6 +194,17 @@ def _loaded_message(
     )
 
 
+def _distinct(values: FloatArray) -> FloatArray:
+    """``values`` without the repeats of the sample before (a device that has not updated its
+    frame since the last poll answers the same sample); at least two values (the first and
+    the last, which may be equal) so that a scatter can be computed."""
+    if values.size < 2:
+        return np.concatenate([values, values])
+    keep = np.concatenate([[True], values[1:] != values[:-1]])
+    kept = values[keep]
+    return kept if kept.size >= 2 else values[[0, -1]]
+
+
 def compute_tare_series(
     device: DeviceConfig,
     series: Sequence[ChannelSeries],
@@ -230,8 +242,11 @@ def compute_tare_series(
             mean[k] = v.mean()
             std[k] = v.std(ddof=1)
             drift[k] = v[-third:].mean() - v[:third].mean()
-            # the scatter within each third, so that a step (a load landing) is a drift, not noise
-            std_err[k] = math.sqrt((v[:third].var(ddof=1) + v[-third:].var(ddof=1)) / third)
+            # the scatter within each third, so that a step (a load landing) is a drift, not
+            # noise; a device that updates its frame more slowly than it is polled repeats a
+            # sample, which is one measurement however often it is read
+            first, last = _distinct(v[:third]), _distinct(v[-third:])
+            std_err[k] = math.sqrt(first.var(ddof=1) / first.size + last.var(ddof=1) / last.size)
             if s.time_s is not None:
                 span = float(s.time_s[-third:].mean() - s.time_s[:third].mean())
                 if span > 0:

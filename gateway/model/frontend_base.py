@@ -159,6 +159,16 @@ class FrontEnd(abc.ABC):
 
     # ---- the converter ---------------------------------------------------------------------
 
+    def idle_floor_codes(self, share: float = 0.06) -> tuple[float, float]:
+        """The codes within ``share`` of full scale of an open sensor's code (inclusive, in
+        the converter's range): where a channel with nothing on it reads when its board
+        leaks a little or its converter has an offset, so a reading there without a zero
+        may be no load at all."""
+        x_open, _ = self._code_edges()
+        fs = float(self.full_scale)
+        open_code = min(max(x_open, 0.0), fs)
+        return max(open_code - share * fs, 0.0), min(open_code + share * fs, fs)
+
     @property
     def full_scale(self) -> int:
         """The largest code, ``2^bits - 1``."""

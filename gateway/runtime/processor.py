@@ -64,6 +64,7 @@ from .status_tables import (
     _BASE_FROM_DIVIDER,
     _BIG_OHM,
     _CHANNEL_ERROR,
+    _CHANNEL_NO_ZERO,
     _CHANNEL_OK,
     _CHANNEL_OPEN,
     _CHANNEL_SHORT,
@@ -143,6 +144,8 @@ class TrackedSample:
     wall_time_s: float
     #: the static (not drift-corrected) force of every converted channel (N), NaN elsewhere
     converted_static_n: FloatArray | None = None
+    #: channels without a zero read at the converter's idle floor (None: none)
+    unzeroed: NDArray[np.bool_] | None = None
 
 
 class DeviceProcessor:
@@ -211,6 +214,15 @@ class DeviceProcessor:
         if self.curves is not None:  # a curve reads no load on an open sensor
             r0[self.curves.positions] = np.inf
         self._baseline = BaselineCorrection.of([c.baseline_ohm for c in chans], r0)
+        # ADC channels without a zero (no baseline, not calibrated): a force read at the
+        # converter's idle floor may be the board's offset, and reads NO_ZERO
+        self._unzeroed: NDArray[np.bool_] | None = None
+        if device.encoding == "adc":
+            unzeroed = np.array(
+                [c.baseline_ohm is None and c.conversion is None and "calibration" not in c.params_source
+                 for c in chans], dtype=np.bool_,
+            )  # fmt: skip
+            self._unzeroed = frozen_copy(unzeroed) if unzeroed.any() else None
 
     def _tare(self, r_model: FloatArray) -> FloatArray:
         """``r_model`` with each baseline channel's excess conductance taken off."""
@@ -410,8 +422,22 @@ class DeviceProcessor:
         return TrackedSample(
             raw, r_out, r_model, base, force, model_status, temperature,
             DeviceState(new_state_model, now, host_time_s, use_device, None, clock_health, curve_state),
-            wall_time_s, static,
+            wall_time_s, static, self._idle_unzeroed(raw),
         )  # fmt: skip
+
+    def _idle_unzeroed(self, raw: RawSample) -> NDArray[np.bool_] | None:
+        """The channels without a zero whose counts lie at the converter's idle floor."""
+        if self._unzeroed is None or raw.counts is None:
+            return None
+        counts = raw.counts[self._pick]
+        front_end = self.device.front_end
+        if counts.dtype == np.uint16:
+            floor = _adc_tables(front_end).idle_floor[counts]
+        else:
+            low, high = front_end.idle_floor_codes()
+            floor = (counts >= low) & (counts <= high)
+        unzeroed = self._unzeroed & floor
+        return unzeroed if unzeroed.any() else None
 
     def _output_force(self, raw: RawSample) -> FloatArray:
         """The device's own output as force (N): a pressure (kPa) acts on the cell's area."""
@@ -457,6 +483,8 @@ class DeviceProcessor:
         if raw.saturated_bits is not None:
             code += raw.saturated_bits[self._pick].view(np.int8)
         status = _FINAL_STATUS[code]
+        if tracked.unzeroed is not None:
+            status = np.where(tracked.unzeroed & (status == _CHANNEL_OK), np.int8(_CHANNEL_NO_ZERO), status)
         valued = VALUED[status]
         force = np.where(valued, tracked.force_n, np.nan)
         reference = self._no_values

@@ -46,6 +46,11 @@ class ChannelStatus(enum.IntEnum):
     #: beyond it (a curve, line or lookup extended past its ends; the physical model beyond
     #: the forces it was calibrated on): a value, but not a calibrated one
     EXTRAPOLATED = 7
+    #: a force read at the converter's idle floor (within 6 % of full scale of the open
+    #: level) on a channel without a zero (no baseline, no calibration): it may be the
+    #: board's leak or the converter's offset rather than a load. The value is kept, but it
+    #: is not counted as contact (total force, area, centre of pressure); tare the channel
+    NO_ZERO = 8
 
     @property
     def label(self) -> str:
@@ -77,6 +82,7 @@ VALUED_STATUSES: tuple[ChannelStatus, ...] = (
     ChannelStatus.NO_CONTACT,
     ChannelStatus.SATURATED,
     ChannelStatus.EXTRAPOLATED,
+    ChannelStatus.NO_ZERO,
 )
 CONTACT_STATUSES: tuple[ChannelStatus, ...] = (
     ChannelStatus.OK,

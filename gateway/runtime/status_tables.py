@@ -20,6 +20,7 @@ FloatArray = NDArray[np.float64]
 _CHANNEL_ERROR = int(ChannelStatus.ERROR)
 _CHANNEL_EXTRAPOLATED = int(ChannelStatus.EXTRAPOLATED)
 _CHANNEL_NO_CONTACT = int(ChannelStatus.NO_CONTACT)
+_CHANNEL_NO_ZERO = int(ChannelStatus.NO_ZERO)
 _CHANNEL_OK = int(ChannelStatus.OK)
 _CHANNEL_OPEN = int(ChannelStatus.OPEN)
 _CHANNEL_SATURATED = int(ChannelStatus.SATURATED)
@@ -38,8 +39,8 @@ _FORCE_SATURATED = int(ForceStatus.SATURATED)
 
 #: The final status is looked up at ``FINAL_BASE_STRIDE`` * base status + 2 * model status +
 #: the device's saturated bit: 2 * 4 + 1 = 9 codes per base status need a stride of 16, and
-#: 16 * 7 + 9 = 121 (the largest base status is ``EXTRAPOLATED`` = 7, never a base) still fits
-#: the int8 the processor computes it in.
+#: 16 * 6 + 9 = 105 (the largest base status is ``ERROR`` = 6: the read-out's verdicts and
+#: the bitmaps give no other) still fits the int8 the processor computes it in.
 FINAL_BASE_STRIDE = 16
 
 
@@ -53,7 +54,7 @@ def _final_status_table() -> NDArray[np.int8]:
     contact).
     """
     assert 2 * max(ForceStatus) + 1 < FINAL_BASE_STRIDE
-    assert FINAL_BASE_STRIDE * max(ChannelStatus) + 2 * max(ForceStatus) + 1 <= np.iinfo(np.int8).max
+    assert FINAL_BASE_STRIDE * _CHANNEL_ERROR + 2 * max(ForceStatus) + 1 <= np.iinfo(np.int8).max
     table = np.empty(FINAL_BASE_STRIDE * len(ChannelStatus), dtype=np.int8)
     table.fill(_CHANNEL_ERROR)  # codes no model status gives
     by_model = {
@@ -105,19 +106,24 @@ _TINY_OHM = float(np.finfo(np.float64).tiny)
 class AdcTables:
     """Per 16-bit register value: the resistance to report (NaN for none: open or
     invalid), the resistance the model gets with and without fault bitmaps, and the
-    ``DividerStatus`` (arrays of 65536, read-only)."""
+    ``DividerStatus`` (arrays of 65536, read-only); ``idle_floor`` marks the codes at the
+    converter's idle floor (``FrontEnd.idle_floor_codes``)."""
 
     report_ohm: FloatArray
     model_ohm: FloatArray
     model_with_bitmaps_ohm: FloatArray
     status: NDArray[np.int8]
+    idle_floor: NDArray[np.bool_]
 
 
 @functools.lru_cache(maxsize=16)
 def _adc_tables(divider: FrontEnd) -> AdcTables:
     """Lookup tables of a divider, shared by every device that has it (about 2 MB)."""
-    r, status = divider.resistance(np.arange(0x10000, dtype=np.int64))
+    codes = np.arange(0x10000, dtype=np.int64)
+    r, status = divider.resistance(codes)
+    low, high = divider.idle_floor_codes()
     return AdcTables(
+        idle_floor=frozen_copy((codes >= low) & (codes <= high)),
         report_ohm=frozen_copy(np.where(r == np.inf, np.nan, r)),
         model_ohm=frozen_copy(r),
         model_with_bitmaps_ohm=frozen_copy(np.minimum(np.maximum(r, _TINY_OHM), _BIG_OHM)),

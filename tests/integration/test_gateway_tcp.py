@@ -33,6 +33,7 @@ from gateway.config import (
 from gateway.errors import DeviceConnectionError, WriteNotAllowedError
 from gateway.modbus.client import ModbusTransport
 from gateway.modbus.image import RegisterImage, decode_sample
+from gateway.modbus.plan import ReadRequest
 from gateway.model import Divider
 from gateway.runtime.bus import Conversion
 from gateway.runtime.clock import CLOCK_STUCK_AFTER_S
@@ -373,9 +374,10 @@ class RecordingTransport(ModbusTransport):
         super().__init__(bus)
         self.reads: list[tuple[int, list[int]]] = []
 
-    async def read_input_registers(self, device_id: int, address: int, count: int) -> list[int]:
-        regs = await super().read_input_registers(device_id, address, count)
-        self.reads.append((address, list(regs)))
+    async def read(self, device_id: int, request: ReadRequest) -> list[int]:
+        regs = await super().read(device_id, request)
+        assert request.kind == "input"  # the simulator's map: every block in input registers
+        self.reads.append((request.address, list(regs)))
         return regs
 
 

@@ -27,6 +27,7 @@ from netutil import free_port
 from prometheus_client import CollectorRegistry
 from prometheus_client.parser import text_string_to_metric_families
 from test_gateway_tcp import array_device
+from waiting import ManualClock, until
 
 from gateway.cli import main
 from gateway.config import bus_config_for, gateway_config_for
@@ -64,16 +65,51 @@ def samples(text: str) -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
 
 
 async def wait_until(cond: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out waiting for {what}")
-        await asyncio.sleep(0.05)
+    await until(cond, timeout_s, what, step_s=0.05)
 
 
-def _array(scenario: str = "holds", speed: float = 60.0) -> SimArray:
+Samples = dict[tuple[str, tuple[tuple[str, str], ...]], float]
+
+
+async def scrape(url: str) -> Samples:
+    """The samples /metrics shows now ({} while it does not answer)."""
+    try:
+        status, text, _ = await asyncio.to_thread(get, url)
+    except (urllib.error.URLError, ConnectionError):
+        return {}
+    return samples(text) if status == 200 else {}
+
+
+async def scrape_until(
+    url: str,
+    shows: Callable[[Samples], bool],
+    proc: asyncio.subprocess.Process,
+    timeout_s: float,
+    what: str,
+    log: list[str] | None = None,
+) -> Samples:
+    """Scrape ``url`` until what it shows satisfies ``shows`` or ``proc`` has exited, and return
+    the last scrape (the caller asserts on it); a time-out fails naming ``what``."""
+    last: list[Samples] = [{}]
+
+    async def check() -> bool:
+        last[0] = await scrape(url)
+        return shows(last[0]) or proc.returncode is not None
+
+    try:
+        await until(check, timeout_s, what, step_s=0.1)
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}\n{''.join(log or [])}") from None
+    return last[0]
+
+
+def _array(
+    scenario: str = "holds", speed: float = 60.0, clock: Callable[[], float] | None = None
+) -> SimArray:
     return SimArray(
-        ArrayConfig(channels=16, columns=4, pitch_mm=2.5, seed=1, scenario=scenario, speed=speed), 1
+        ArrayConfig(channels=16, columns=4, pitch_mm=2.5, seed=1, scenario=scenario, speed=speed),
+        1,
+        clock=clock,
     )
 
 
@@ -193,6 +229,7 @@ columns = 4
     )
 
 
+@pytest.mark.slow  # a gateway process
 async def test_run_command_serves_reloads_and_stops(tmp_path: Path) -> None:
     array = _array(speed=1.0)
     async with serve_tcp([array], host="127.0.0.1", port=0) as sim:
@@ -211,29 +248,18 @@ async def test_run_command_serves_reloads_and_stops(tmp_path: Path) -> None:
 
         reader = asyncio.create_task(read_log())
         url = f"http://127.0.0.1:{port}/metrics"
-
-        async def scrape() -> dict[tuple[str, tuple[tuple[str, str], ...]], float]:
-            try:
-                status, text, _ = await asyncio.to_thread(get, url)
-            except (urllib.error.URLError, ConnectionError):
-                return {}
-            return samples(text) if status == 200 else {}
-
         up_key = ("tactile_device_up", (("device", "array1"),))
         interval_key = ("tactile_poll_interval_seconds", (("device", "array1"),))
+        reads_key = ("tactile_reads_total", (("device", "array1"),))
         try:
-            values: dict[tuple[str, tuple[tuple[str, str], ...]], float] = {}
-            deadline = time.monotonic() + 15
-            while values.get(up_key) != 1.0:
-                assert time.monotonic() < deadline, f"gateway did not come up: {''.join(log)}"
-                await asyncio.sleep(0.1)
-                values = await scrape()
+            values = await scrape_until(url, lambda v: v.get(up_key) == 1.0, proc, 15, "the device up", log)
+            assert values.get(up_key) == 1.0, f"gateway did not come up: {''.join(log)}"
             assert values[interval_key] == 0.05
             # SIGHUP with a changed poll interval: applied, still up
             _write_config(cfg, port, sim.port, 0.1)
             proc.send_signal(signal.SIGHUP)
             await wait_until(lambda: any("reloaded" in line for line in log), 10, "reload logged")
-            values = await scrape()
+            values = await scrape(url)
             assert values[interval_key] == 0.1
             # SIGHUP with a broken file: logged, the old configuration keeps running
             cfg.write_text("[[bus]]\nname = 'sim'\nkind = 'carrier-pigeon'\n")
@@ -251,11 +277,13 @@ async def test_run_command_serves_reloads_and_stops(tmp_path: Path) -> None:
 
                 await wait_until(failed_or_exited, 10, f"failed reload logged ({reason})")
                 assert proc.returncode is None, "".join(log)
-            reads0 = (await scrape())[("tactile_reads_total", (("device", "array1"),))]
-            await asyncio.sleep(0.5)
-            values = await scrape()
+            reads0 = (await scrape(url))[reads_key]
+            # the gateway keeps polling after the reloads: its read counter moves on
+            values = await scrape_until(
+                url, lambda v: v.get(reads_key, reads0) > reads0, proc, 10, "another read of the device", log
+            )
             assert values[up_key] == 1.0
-            assert values[("tactile_reads_total", (("device", "array1"),))] > reads0
+            assert values[reads_key] > reads0
             proc.send_signal(signal.SIGTERM)
             code = await asyncio.wait_for(proc.wait(), timeout=10)
             assert code == 0, "".join(log)
@@ -287,10 +315,15 @@ def test_poll_once_unreachable_device_lists_stale_channels_and_exits_1(tmp_path:
     assert all(c["force_n"] is None for c in dev["channels"])
 
 
+@pytest.mark.slow  # a gateway process
 async def test_poll_once_reads_a_device(tmp_path: Path) -> None:
-    array = _array(scenario="holds", speed=60.0)
+    # The device stands at 18 s (the 0.5 N hold) on a clock the test holds, however long the
+    # command takes to start: sleeping 0.3 s at 60x put it there only on an idle machine.
+    clock = ManualClock()
+    array = _array(scenario="holds", speed=60.0, clock=clock)
+    clock.advance(18.0 / 60.0)
+    assert array.true_force_n().min() == 0.5
     async with serve_tcp([array], host="127.0.0.1", port=0) as sim:
-        await asyncio.sleep(0.3)  # 18 s device time: the 0.5 N hold
         cfg = tmp_path / "gateway.toml"
         _write_config(cfg, free_port(), sim.port, 0.05)
         proc = await asyncio.create_subprocess_exec(
@@ -308,6 +341,7 @@ async def test_poll_once_reads_a_device(tmp_path: Path) -> None:
     assert text.count(" ok ") + text.count(" no_contact ") == 16, text
 
 
+@pytest.mark.slow  # a gateway process
 async def test_demo_shows_the_array_and_serves_metrics() -> None:
     # The demo runs until the test has seen the array up, then gets SIGINT: a fixed --duration
     # raced the scrapes on a busy machine (the demo could end before a scrape saw it up).
@@ -318,25 +352,36 @@ async def test_demo_shows_the_array_and_serves_metrics() -> None:
         *GATEWAY, "demo", "--port", str(port), "--duration", "120",
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, env=env,
     )  # fmt: skip
+    printed: list[bytes] = []
+
+    async def read_stdout() -> None:
+        assert proc.stdout is not None
+        while line := await proc.stdout.readline():
+            printed.append(line)
+
+    assert proc.stderr is not None
+    reader, errors = asyncio.create_task(read_stdout()), asyncio.create_task(proc.stderr.read())
     try:
         url = f"http://127.0.0.1:{port}/metrics"
-        values: dict[tuple[str, tuple[tuple[str, str], ...]], float] = {}
-        deadline = time.monotonic() + 60
-        while values.get(("tactile_device_up", (("device", "demo"),))) != 1.0 and time.monotonic() < deadline:
-            await asyncio.sleep(0.2)
-            try:
-                status, text, _ = await asyncio.to_thread(get, url)
-                values = samples(text) if status == 200 else {}
-            except (urllib.error.URLError, ConnectionError):
-                values = {}
-        await asyncio.sleep(0.5)  # a scrape or two of an up array
+        up_key = ("tactile_device_up", (("device", "demo"),))
+        polls_key = ("tactile_poll_duration_seconds_count", (("device", "demo"),))
+        values = await scrape_until(url, lambda v: v.get(up_key) == 1.0, proc, 60, "the demo's array up")
+        # a scrape or two of an up array (one more poll seen) and the demo's line saying so
+        polls0 = values.get(polls_key, 0.0)
+        values = await scrape_until(url, lambda v: v.get(polls_key, 0.0) > polls0, proc, 30, "another poll")
+        await until(
+            lambda: len(printed) >= 2 or proc.returncode is not None, 30, "the demo's line once it is up"
+        )
         proc.send_signal(signal.SIGINT)
-        out, err = await asyncio.wait_for(proc.communicate(), timeout=30)
+        await asyncio.wait_for(proc.wait(), timeout=30)
         ran_s = time.monotonic() - started
     finally:
         if proc.returncode is None:
             proc.kill()
             await proc.wait()
+        await reader
+        err = await errors
+    out = b"".join(printed)
     assert proc.returncode == 0, err.decode()
     assert values.get(("tactile_device_up", (("device", "demo"),))) == 1.0
     lines = out.decode().splitlines()
@@ -352,6 +397,7 @@ async def test_demo_shows_the_array_and_serves_metrics() -> None:
         ), lines
 
 
+@pytest.mark.slow  # two gateway processes, one runs 1.5 s
 def test_demo_refuses_a_bad_host_in_one_line_and_takes_any_port() -> None:
     bad = subprocess.run(
         [*GATEWAY, "demo", "--host", "a b", "--duration", "1"], capture_output=True, text=True, timeout=60

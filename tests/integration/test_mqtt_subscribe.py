@@ -32,7 +32,7 @@ from sim_device.modbus_server import serve_tcp
 
 BIN = Path(sys.executable).parent
 PASSWORD = "s3cret-pw"
-WITH_VALUE = {"ok", "no_contact", "saturated", "extrapolated"}
+WITH_VALUE = {"ok", "no_contact", "saturated", "extrapolated", "no_zero"}
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,6 @@ import json
 import shutil
 import subprocess
 import sys
-import time
 import urllib.parse
 import urllib.request
 from collections.abc import Callable, Iterator
@@ -22,23 +21,12 @@ from typing import Any
 
 import pytest
 from netutil import free_port
+from waiting import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
 
-
-def _wait(what: str, check: Callable[[], Any], timeout_s: float = 30.0) -> Any:
-    deadline = time.monotonic() + timeout_s
-    last: Any = None
-    while time.monotonic() < deadline:
-        try:
-            last = check()
-            if last:
-                return last
-        except OSError as exc:
-            last = exc
-        time.sleep(0.25)
-    raise AssertionError(f"timed out waiting for {what} (last: {last!r})")
+pytestmark = [pytest.mark.prometheus, pytest.mark.slow]
 
 
 def _query(port: int, expr: str) -> list[dict[str, Any]]:
@@ -73,6 +61,22 @@ class Processes:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+    def check_running(self) -> None:
+        """Fail at once, not at a time-out, if a process has exited (a port taken, a bad flag)."""
+        for name, proc in self.running.items():
+            if proc.poll() is not None:
+                raise AssertionError(f"{name} exited with code {proc.returncode}")
+
+    def wait(self, what: str, check: Callable[[], Any], timeout_s: float = 30.0) -> Any:
+        """Poll ``check`` (a query; a refused connection counts as not yet) until it returns
+        something truthy, while every process still runs."""
+
+        def running_and(check: Callable[[], Any] = check) -> Any:
+            self.check_running()
+            return check()
+
+        return wait_for(running_and, timeout_s, what, step_s=0.25, ignore=(OSError,))
 
     def log(self, name: str) -> str:
         return (self.logs / f"{name}.log").read_text(errors="replace")[-3000:]
@@ -170,11 +174,11 @@ scrape_configs:
     )
 
     try:
-        up = _wait(
+        up = procs.wait(
             "tactile_device_up == 1 in Prometheus", lambda: _query(prom_port, "tactile_device_up == 1"), 60
         )
         assert up[0]["metric"]["device"] == "array1"
-        forces = _wait(
+        forces = procs.wait(
             "four force series",
             lambda: (r := _query(prom_port, 'tactile_force_newtons{device="array1"}')) and len(r) == 4 and r,
         )
@@ -183,13 +187,13 @@ scrape_configs:
         assert all(abs(v - 2.0) < 0.1 for v in values), values
 
         procs.stop("sim")
-        down = _wait(
+        down = procs.wait(
             "tactile_device_up == 0 after the array stopped",
             lambda: _query(prom_port, "tactile_device_up == 0"),
             30,
         )
         assert down[0]["metric"]["device"] == "array1"
-        alert = _wait(
+        alert = procs.wait(
             "TactileDeviceDown pending",
             lambda: [a for a in _alerts(prom_port) if a["labels"]["alertname"] == "TactileDeviceDown"],
             30,

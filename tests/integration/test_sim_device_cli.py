@@ -10,8 +10,13 @@ from pathlib import Path
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
+from waiting import until
 
 from sim_device import registers as reg
+
+pytestmark = pytest.mark.slow  # a simulator process per test
+
+SPEED = 20.0  # the 0.5 N hold is device time 10-130 s: 0.5-6.5 s of wall time after the start
 
 
 async def start(*args: str) -> tuple[asyncio.subprocess.Process, int]:
@@ -29,7 +34,7 @@ async def start(*args: str) -> tuple[asyncio.subprocess.Process, int]:
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 async def test_cli_serves_records_and_stops_on_signal(tmp_path: Path, sig: signal.Signals) -> None:
     record = tmp_path / "live.csv"
-    options = ["--scenario", "holds", "--speed", "60", "--channels", "4"]
+    options = ["--scenario", "holds", "--speed", f"{SPEED:g}", "--channels", "4"]
     proc, port = await start(
         "--tcp", "127.0.0.1:0", *options, "--record", str(record), "--record-period", "0.5"
     )
@@ -38,8 +43,20 @@ async def test_cli_serves_records_and_stops_on_signal(tmp_path: Path, sig: signa
         assert await client.connect()
         rr = await client.read_holding_registers(0, count=1, device_id=1)
         assert rr.registers == [4]
-        await asyncio.sleep(0.5)  # 30 s device time: the 0.5 N hold
+
+        async def device_time_past(limit_s: float) -> float:
+            """The device's clock if it is past ``limit_s``, else 0. A read of the clock latches
+            the frame: the force read next is of the same instant."""
+            rr = await client.read_input_registers(0, count=7, device_id=1)
+            assert not rr.isError(), rr
+            w = rr.registers
+            t_s = ((w[2] << 48) | (w[3] << 32) | (w[4] << 16) | w[5]) / 1e3
+            return t_s if t_s >= limit_s else 0.0
+
+        # the device's own clock past 20.5 s: in the 0.5 N hold, with 40 record periods behind it
+        t_s = await until(lambda: device_time_past(20.5), 20.0, "20.5 s of device time")
         forces = await client.read_input_registers(reg.IR_TRUE_FORCE, count=8, device_id=1)
+        assert 20.5 <= t_s < 130.0, f"the machine stalled past the 0.5 N hold (device time {t_s} s)"
         assert client.convert_from_registers(forces.registers[:2], client.DATATYPE.FLOAT32) == 0.5
         client.close()
         proc.send_signal(sig)

@@ -24,6 +24,7 @@ from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, Async
 from pymodbus.exceptions import ModbusException
 from pymodbus.framer import FramerType
 from pymodbus.pdu.mei_message import ReadDeviceInformationResponse
+from waiting import ManualClock, until
 
 from sim_device import ArrayConfig, LineTiming, Scenario, SimArray, serve_serial, serve_tcp, serve_tls
 from sim_device import registers as reg
@@ -114,12 +115,30 @@ def check_against_model(data: dict[str, np.ndarray | int], array: SimArray) -> N
 HOLDS = {"scenario": "holds", "speed": 200.0, "sample_period_s": 2.0, "noise_lsb_rms": 2.0, "seed": 5}
 
 
+async def run_device_to(client: Client, clock: ManualClock, arrays: list[SimArray], device_s: float) -> None:
+    """Move the arrays' clock (the test's, not the wall's) to ``device_s`` of device time in
+    pieces, reading each array's sample counter after every piece: the server advances the
+    physics lazily, a piece per read, as it does on the wall clock, but the device stands at
+    exactly ``device_s`` however long the reads take on a busy machine."""
+    speed = arrays[0].config.speed
+    pieces = 8
+    start_s = clock() * speed
+    for k in range(1, pieces + 1):
+        clock.now_s = (start_s + (device_s - start_s) * k / pieces) / speed
+        for array in arrays:
+            rr = await client.read_input_registers(reg.IR_SAMPLE_COUNTER, count=2, device_id=array.device_id)
+            assert not rr.isError(), rr
+    for array in arrays:
+        assert array.device_time_s == pytest.approx(device_s)
+
+
 async def test_tcp_reads_what_the_model_predicts() -> None:
-    array = SimArray(ArrayConfig(**HOLDS))  # type: ignore[arg-type]
+    clock = ManualClock()
+    array = SimArray(ArrayConfig(**HOLDS), clock=clock)  # type: ignore[arg-type]
     async with serve_tcp(array) as server:
         client = await tcp_client(server.port)
         try:
-            await asyncio.sleep(0.8)  # about 160 s device time: the 2 N hold, creeping
+            await run_device_to(client, clock, [array], 160.0)  # the 2 N hold, creeping
             data = await snapshot(client, 16)
             assert np.asarray(data["force"]).min() == pytest.approx(2.0)
             check_against_model(data, array)
@@ -130,14 +149,16 @@ async def test_tcp_reads_what_the_model_predicts() -> None:
 
 async def test_rtu_serial_two_arrays_on_one_bus(pty_pair: tuple[str, str]) -> None:
     server_end, client_end = pty_pair
-    slow = {**HOLDS, "speed": 100.0}  # a sample every 20 ms: a snapshot fits between two
-    first = SimArray(ArrayConfig(**slow), device_id=1)  # type: ignore[arg-type]
-    second = SimArray(ArrayConfig(**{**slow, "channels": 8, "columns": 4, "seed": 9}), device_id=7)  # type: ignore[arg-type]
+    slow = {**HOLDS, "speed": 100.0}
+    second_config = ArrayConfig(**{**slow, "channels": 8, "columns": 4, "seed": 9})  # type: ignore[arg-type]
+    clock = ManualClock()
+    first = SimArray(ArrayConfig(**slow), device_id=1, clock=clock)  # type: ignore[arg-type]
+    second = SimArray(second_config, device_id=7, clock=clock)
     async with serve_serial([first, second], port=server_end, baudrate=115200, line_timing=False):
         client = AsyncModbusSerialClient(client_end, baudrate=115200, timeout=0.5, retries=0)
         assert await client.connect()
         try:
-            await asyncio.sleep(0.3)  # about 30 s device time: the 0.5 N hold, creeping
+            await run_device_to(client, clock, [first, second], 30.0)  # the 0.5 N hold, creeping
             check_against_model(await snapshot(client, 16, 1), first)
             check_against_model(await snapshot(client, 8, 7), second)
             with pytest.raises(ModbusException):  # nobody answers for id 3 on the bus
@@ -202,13 +223,15 @@ async def test_rtu_garbled_frame_then_recovery(pty_pair: tuple[str, str]) -> Non
             client.close()
 
 
+@pytest.mark.slow  # waits out two client time-outs (about 2 s)
 async def test_rtu_framing_over_tcp() -> None:
-    arrays = [SimArray(ArrayConfig(**HOLDS), device_id=1), SimArray(ArrayConfig(**HOLDS), device_id=2)]  # type: ignore[arg-type]
+    clock = ManualClock()
+    arrays = [SimArray(ArrayConfig(**HOLDS), device_id=i, clock=clock) for i in (1, 2)]  # type: ignore[arg-type]
     async with serve_tcp(arrays, framer="rtu") as server:
         client = await tcp_client(server.port, framer=FramerType.RTU)
         client.comm_params.timeout_connect = 0.3
         try:
-            await asyncio.sleep(0.5)
+            await run_device_to(client, clock, arrays, 100.0)  # the 0.5 N hold
             check_against_model(await snapshot(client, 16, 2), arrays[1])
             with pytest.raises(ModbusException):  # unknown id: silence, as on a bus
                 await client.read_input_registers(0, count=2, device_id=5)
@@ -237,13 +260,14 @@ def certificate(tmp_path: Path) -> tuple[str, str]:
 
 async def test_tls_reads_what_the_model_predicts(certificate: tuple[str, str]) -> None:
     cert, key = certificate
-    array = SimArray(ArrayConfig(**HOLDS))  # type: ignore[arg-type]
+    clock = ManualClock()
+    array = SimArray(ArrayConfig(**HOLDS), clock=clock)  # type: ignore[arg-type]
     async with serve_tls(array, certfile=cert, keyfile=key) as server:
         context = ssl.create_default_context(cafile=cert)
         client = AsyncModbusTlsClient("127.0.0.1", port=server.port, sslctx=context, timeout=1.0, retries=0)
         assert await client.connect()
         try:
-            await asyncio.sleep(0.3)
+            await run_device_to(client, clock, [array], 60.0)  # the 0.5 N hold
             check_against_model(await snapshot(client, 16), array)
         finally:
             client.close()
@@ -286,7 +310,8 @@ async def read_holding(client: Client, n: int) -> list[int]:
 
 
 async def test_invalid_configuration_writes_are_refused() -> None:
-    array = SimArray(ArrayConfig())
+    clock = ManualClock()
+    array = SimArray(ArrayConfig(), clock=clock)
     async with serve_tcp(array) as server:
         client = await tcp_client(server.port)
         try:
@@ -323,7 +348,9 @@ async def test_invalid_configuration_writes_are_refused() -> None:
             after = await read_holding(client, 16)
             assert after[1] == 12 and after[12 + 5] == 1  # 12 configuration registers, then the modes
             assert array.electronics.adc_bits == 12 and array.electronics.supply_v == pytest.approx(3.3)
-            await asyncio.sleep(0.05)
+            # the mode holds from the next conversion on: one sample period of device time
+            assert array.device_time_s == array.last_sample_time_s
+            clock.advance(array.electronics.sample_period_s / array.config.speed)
             status = await client.read_input_registers(reg.IR_STATUS_SUMMARY, count=1, device_id=1)
             opened = await client.read_input_registers(reg.IR_OPEN_BITMAP, count=1, device_id=1)
             assert status.registers[0] & reg.STATUS_ANY_OPEN and opened.registers[0] == 1 << 5
@@ -331,8 +358,10 @@ async def test_invalid_configuration_writes_are_refused() -> None:
             client.close()
 
 
+@pytest.mark.slow  # waits out client time-outs (about 3 s)
 async def test_each_fault_appears_and_the_server_keeps_serving() -> None:
-    array = SimArray(ArrayConfig(scenario="holds", speed=20.0))
+    clock = ManualClock()
+    array = SimArray(ArrayConfig(scenario="holds", speed=20.0), clock=clock)
     async with serve_tcp(array) as server:
         client = await tcp_client(server.port)
         client.comm_params.timeout_connect = 0.3
@@ -373,15 +402,16 @@ async def test_each_fault_appears_and_the_server_keeps_serving() -> None:
             with pytest.raises(ModbusException):
                 await client.read_input_registers(0, count=2, device_id=1)
             array.faults.clear()
-            for _ in range(40):
-                if client.connected and server._server.active_connections:
-                    break
-                await asyncio.sleep(0.05)
+            await until(
+                lambda: client.connected and server._server.active_connections, 10.0, "the client reconnected"
+            )
             await healthy()
 
             # a channel goes open on schedule (device time)
             array.faults.schedule(array.device_time_s + 1.0, channel=2, channel_mode="open")
-            await asyncio.sleep(0.15)
+            opened = await client.read_input_registers(reg.IR_OPEN_BITMAP, count=1, device_id=1)
+            assert opened.registers == [0], "open before its time"
+            clock.advance(1.5 / array.config.speed)  # 1.5 s of device time: past the scheduled instant
             opened = await client.read_input_registers(reg.IR_OPEN_BITMAP, count=1, device_id=1)
             assert opened.registers == [1 << 2]
             adc = await client.read_input_registers(reg.IR_ADC_COUNTS + 2, count=1, device_id=1)
@@ -391,12 +421,20 @@ async def test_each_fault_appears_and_the_server_keeps_serving() -> None:
 
 
 async def test_client_disconnecting_mid_request() -> None:
-    array = SimArray(ArrayConfig())
+    clock = ManualClock()
+    array = SimArray(ArrayConfig(), clock=clock)
+    delay_s = 0.2
     async with serve_tcp(array) as server:
-        array.faults.delay_s = 0.2
+        array.faults.delay_s = delay_s
         client = await tcp_client(server.port)
+        # the device's clock moves one sample period, so serving the request (the server reads
+        # the registers, then holds the answer back) converts one sample: that is the event
+        clock.advance(array.electronics.sample_period_s / array.config.speed)
+        counter = array.sample_counter
         pending = asyncio.ensure_future(client.read_input_registers(0, count=2, device_id=1))
-        await asyncio.sleep(0.05)
+        await until(lambda: array.sample_counter > counter, 10.0, "the server to take the request")
+        served_at = time.monotonic()
+        assert not pending.done(), "the answer was not held back"
         client.close()
         with pytest.raises(ModbusException):
             await pending
@@ -408,7 +446,10 @@ async def test_client_disconnecting_mid_request() -> None:
         await writer.wait_closed()
         del reader
         array.faults.clear()
-        await asyncio.sleep(0.3)  # the held-back response would have been due now
+        # Kept on purpose: the instant the held-back answer falls due, with nobody to take it,
+        # is what is under test (the server must keep serving after it). Measured from when
+        # the request was served, with a margin, not a fixed guess.
+        await asyncio.sleep(max(0.0, served_at + delay_s - time.monotonic()) + 0.05)
         again = await tcp_client(server.port)
         try:
             rr = await again.read_input_registers(0, count=2, device_id=1)
@@ -423,7 +464,7 @@ async def test_server_stops_cleanly_and_frees_the_port() -> None:
         port = server.port
         client = await tcp_client(port)
         assert not (await client.read_input_registers(0, count=1, device_id=1)).isError()
-    await asyncio.sleep(0.05)
+    # no wait: the port is closed when the server's block has ended (it awaits the listener)
     with pytest.raises(OSError):
         await asyncio.open_connection("127.0.0.1", port)
     client.close()

@@ -11,9 +11,12 @@
 // the frame at the slider's time to the same drawing code.
 "use strict";
 
-const ST = { OK: 0, NO_CONTACT: 1, SATURATED: 2, OPEN: 3, SHORT: 4, STALE: 5, ERROR: 6, EXTRAPOLATED: 7 };
+const ST = { OK: 0, NO_CONTACT: 1, SATURATED: 2, OPEN: 3, SHORT: 4, STALE: 5, ERROR: 6, EXTRAPOLATED: 7,
+             NO_ZERO: 8 };
 // the statuses whose channel carries a force (drawn in the colour of its force)
-const VALUED = new Set([ST.OK, ST.NO_CONTACT, ST.SATURATED, ST.EXTRAPOLATED]);
+const VALUED = new Set([ST.OK, ST.NO_CONTACT, ST.SATURATED, ST.EXTRAPOLATED, ST.NO_ZERO]);
+// a channel without a zero read at the converter's idle floor: a dotted grey outline
+const NO_ZERO_COLOUR = "#9aa3ad";
 // an extrapolated channel (a force outside its calibrated range): a dashed outline in this colour
 const EXTRAPOLATED_COLOUR = "#3fd0c9";
 const HISTORY_S = 30;
@@ -280,6 +283,15 @@ function drawMap(canvas, d, opts) {
         ctx.strokeRect(x + w, y + w, side - 2 * w, side - 2 * w);
         ctx.restore();
         label = "EXT";
+      } else if (status === ST.NO_ZERO) {
+        const w = Math.max(1.5, side * 0.04);
+        ctx.save();
+        ctx.strokeStyle = NO_ZERO_COLOUR;
+        ctx.lineWidth = w;
+        ctx.setLineDash([w, w]);
+        ctx.strokeRect(x + w, y + w, side - 2 * w, side - 2 * w);
+        ctx.restore();
+        label = "NO 0";
       }
     } else {
       const fill = { [ST.OPEN]: ["#555", "#222"], [ST.SHORT]: ["#d0307a", "#401020"],

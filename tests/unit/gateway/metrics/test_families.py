@@ -127,7 +127,7 @@ def test_a_gauge_per_channel_leaves_the_absent_values_out() -> None:
 def test_the_status_has_one_series_per_status() -> None:
     lines = _samples(render(_known()), "tactile_channel_status")
     assert len(lines) == 5 * len(ChannelStatus)
-    assert lines[:8] == [
+    assert lines[: len(ChannelStatus)] == [
         f'tactile_channel_status{{channel="ch00",device="left",status="{s.label}"}} '
         + ("1.0" if s is ChannelStatus.OK else "0.0")
         for s in ChannelStatus

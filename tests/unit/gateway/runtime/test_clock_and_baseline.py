@@ -344,9 +344,12 @@ def test_an_adc_channel_at_its_baseline_counts_is_no_contact() -> None:
     proc = DeviceProcessor(device, "bus", 0.1)
     counts = np.array([3895, 3895], dtype=np.uint16)  # register values: the lookup path
     snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 0.0, 0.0)
-    assert snap.status.tolist() == [ChannelStatus.NO_CONTACT, ChannelStatus.OK]
+    # without a zero the leak reads as force at the converter's idle floor (3895 >= 4095 -
+    # 0.06 x 4095 = 3849.3): shown, flagged no_zero, not counted
+    assert snap.status.tolist() == [ChannelStatus.NO_CONTACT, ChannelStatus.NO_ZERO]
     assert snap.force_n[0] == 0.0
-    assert snap.force_n[1] == pytest.approx(0.1186, abs=5e-4)  # the leak read as force
+    assert snap.force_n[1] == pytest.approx(0.1186, abs=5e-4)
+    assert snap.total_force_n == 0.0 and snap.channels_in_contact == 0
 
 
 # --------------------------------------------------------------------------- saturated codes

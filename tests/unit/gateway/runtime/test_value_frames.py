@@ -431,3 +431,43 @@ def test_a_write_names_one_value_or_several_with_function_16() -> None:
         config("[[bus.device.setup]]\naddress = 1\nvalues = [1, 2]\nfunction = 6\n" + FRAME_AT_0)
     with pytest.raises(ConfigError, match=r"actions.zero\[0\].value.*0..65535"):
         config("[bus.device.actions]\nzero = [{ address = 1, value = 70000 }]\n" + FRAME_AT_0)
+
+
+# ------------------------------------------------------------------ no zero
+NO_ZERO_BOARD = """
+[bus.device.front_end]
+kind = "high_side"
+reference_ohm = 10000.0
+supply_v = 3.3
+adc_bits = 12
+
+[bus.device.frame]
+quantity = "counts"
+address = 7
+"""
+
+
+async def test_an_idle_cell_without_a_zero_reads_no_zero_and_is_not_counted() -> None:
+    """A DFRobot-style board without a zero: idle cells read 200 counts of 4095, which the
+    assumed divider takes for 10 kohm x (4095 / 200 - 1) = 194.75 kohm and the default model
+    for about 0.12 N (the phantom force a user reported). Within 6 % of full scale of the open
+    code (0..245.7) a force without a zero is NO_ZERO: its value is kept but it is not
+    counted in the array's total or contact; 246 counts and a load of 2000 read OK. With
+    baselines the idle cells read 0 N, no contact."""
+    dev = VirtualDevice()
+    dev.set_input(7, [200, 245, 246, 2000])
+    poller, _, _ = poller_for(config(NO_ZERO_BOARD), dev)
+    snap = await poll(poller)
+    nz, ok = ChannelStatus.NO_ZERO, ChannelStatus.OK
+    assert snap.status.tolist() == [nz, nz, ok, ok], snap.status
+    assert 0.05 < snap.force_n[0] < 0.2  # the value is kept: the phantom force
+    assert snap.channels_in_contact == 2
+    assert snap.total_force_n == pytest.approx(float(snap.force_n[2] + snap.force_n[3]), rel=1e-12)
+    tared = BUS.replace("pitch_mm = 2.5\n", "pitch_mm = 2.5\nbaseline_counts = [200, 200, 200, 200]\n")
+    zeroed = parse_config(tared + NO_ZERO_BOARD)  # the same board, every channel tared at 200 counts
+    poller2, _, _ = poller_for(zeroed, dev)
+    dev.set_input(7, [200, 200, 200, 2000])
+    snap2 = await poll(poller2)
+    none = ChannelStatus.NO_CONTACT
+    assert snap2.status.tolist() == [none, none, none, ok]
+    assert snap2.force_n.tolist()[:3] == [0.0, 0.0, 0.0]

@@ -30,7 +30,7 @@ def test_the_legend_lists_every_status_but_ok_with_a_swatch() -> None:
     css = (STATIC / "style.css").read_text(encoding="utf-8")
     swatches = re.findall(r'<span class="sw sw-([a-z]+)"></span>', html)
     # every status, then a channel that is no status at all: off in the configuration
-    statuses = ["nocontact", "saturated", "extrapolated", "open", "short", "stale", "error"]
+    statuses = ["nocontact", "saturated", "extrapolated", "nozero", "open", "short", "stale", "error"]
     assert swatches == [*statuses, "disabled"]
     for name in swatches:
         assert f".sw-{name} {{" in css, name
