@@ -214,12 +214,12 @@ class DeviceProcessor:
         if self.curves is not None:  # a curve reads no load on an open sensor
             r0[self.curves.positions] = np.inf
         self._baseline = BaselineCorrection.of([c.baseline_ohm for c in chans], r0)
-        # ADC channels without a zero (no baseline, not calibrated): a force read at the
-        # converter's idle floor may be the board's offset, and reads NO_ZERO
+        # ADC channels without a zero (no baseline, nothing but default parameters): a force
+        # read at the converter's idle floor may be the board's offset, and reads NO_ZERO
         self._unzeroed: NDArray[np.bool_] | None = None
         if device.encoding == "adc":
             unzeroed = np.array(
-                [c.baseline_ohm is None and c.conversion is None and "calibration" not in c.params_source
+                [c.baseline_ohm is None and c.conversion is None and c.params_source == ("defaults",)
                  for c in chans], dtype=np.bool_,
             )  # fmt: skip
             self._unzeroed = frozen_copy(unzeroed) if unzeroed.any() else None

@@ -47,7 +47,7 @@ class ChannelStatus(enum.IntEnum):
     #: the forces it was calibrated on): a value, but not a calibrated one
     EXTRAPOLATED = 7
     #: a force read at the converter's idle floor (within 6 % of full scale of the open
-    #: level) on a channel without a zero (no baseline, no calibration): it may be the
+    #: level) on a channel without a zero (no baseline, default parameters): it may be the
     #: board's leak or the converter's offset rather than a load. The value is kept, but it
     #: is not counted as contact (total force, area, centre of pressure); tare the channel
     NO_ZERO = 8
