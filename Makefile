@@ -5,7 +5,7 @@ STAMP   := $(VENV)/.installed
 SYSDEPS := socat prometheus mosquitto chromium
 export PYTHONDONTWRITEBYTECODE := 1
 
-.PHONY: test lint bench demo venv sysdeps clean stress-test soak screenshots
+.PHONY: test lint bench demo venv sysdeps clean stress-test soak screenshots test-fast
 
 $(STAMP): pyproject.toml
 	python3 -m venv $(VENV)
@@ -38,6 +38,14 @@ lint: $(STAMP)
 
 test: $(STAMP) sysdeps lint
 	$(PY) -m pytest -q
+
+# While working: only the tests not marked slow (no browser, broker, prometheus server or
+# gateway/simulator process; markers in pyproject.toml). Installs no Debian packages and skips
+# lint; the serial and promtool tests in it need socat and prometheus from one `make sysdeps`.
+# Narrow it further with e.g. FAST='not slow and not serial'.
+FAST ?= not slow
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "$(FAST)"
 
 bench: $(STAMP)
 	$(PY) -m bench
