@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -40,16 +41,53 @@ from .objectives import OFFSET
 from .records import ChannelRecord
 from .rivals import LINE_ZERO_MARGIN, ConductanceLine, Rivals, verdict
 
-MODELS = ("physics", "line", "lookup", "curve", "auto")
+
+class CalibrationModel(StrEnum):
+    """What a calibration file gives a channel: the physical model, the conductance line, a
+    monotone lookup, the best static curve with drift correction, or whichever of them reads
+    held-out force best."""
+
+    PHYSICS = "physics"
+    LINE = "line"
+    LOOKUP = "lookup"
+    CURVE = "curve"
+    AUTO = "auto"
+
+
+class Objective(StrEnum):
+    """What the physical model's fit minimises: log-resistance residuals, force residuals
+    (started from the log-R fit), or both, keeping the one that reads held-out force better."""
+
+    AUTO = "auto"
+    LOG_R = "log_r"
+    FORCE = "force"
+
+    @property
+    def option(self) -> str:
+        """The command line's spelling (``log-r``)."""
+        return self.value.replace("_", "-")
+
+
+class OffsetMode(StrEnum):
+    """The reference-force zero offset: fit it and keep it only if it helps, fit it, or none."""
+
+    AUTO = "auto"
+    FIT = "fit"
+    NONE = "none"
+
+
+MODELS = tuple(m.value for m in CalibrationModel)
 #: The physical model's written range reaches light touch: force_min_n = min(calibrated
 #: minimum / ``MODEL_RANGE_BELOW``, ``LIGHT_TOUCH_N``) ...
 MODEL_RANGE_BELOW = 10.0
 LIGHT_TOUCH_N = 0.01
 #: ... and beyond the top: force_max_n = ``MODEL_RANGE_ABOVE`` x the calibrated maximum.
 MODEL_RANGE_ABOVE = 3.0
-OBJECTIVE_CHOICES = ("auto", "log_r", "force")
-OFFSET_CHOICES = ("auto", "fit", "none")
-OBJECTIVE_WORDS = {"log_r": "log-R", "force": "force"}
+OBJECTIVE_CHOICES = tuple(o.value for o in Objective)
+OFFSET_CHOICES = tuple(o.value for o in OffsetMode)
+#: an objective by its command-line spelling (``log-r``)
+OBJECTIVE_OPTIONS = {o.option: o for o in Objective}
+OBJECTIVE_WORDS: dict[str, str] = {Objective.LOG_R: "log-R", Objective.FORCE: "force"}
 TIME_EFFECTS = ("creep", "creep2")
 
 
@@ -234,8 +272,8 @@ def calibrate(
     record_name: str = "",
     metadata: Mapping[str, str] | None = None,
     try_hysteresis: bool = True,
-    objective: str = "auto",
-    force_offset: str = "auto",
+    objective: Objective | str = Objective.AUTO,
+    force_offset: OffsetMode | str = OffsetMode.AUTO,
 ) -> Calibration:
     """Fit the model and its rivals to one channel of a record.
 
@@ -249,6 +287,7 @@ def calibrate(
         raise ValueError(f"objective must be one of {', '.join(OBJECTIVE_CHOICES)}, got {objective!r}")
     if force_offset not in OFFSET_CHOICES:
         raise ValueError(f"force_offset must be one of {', '.join(OFFSET_CHOICES)}, got {force_offset!r}")
+    objective, force_offset = Objective(objective), OffsetMode(force_offset)
     meta = dict(metadata or {})
     prior = prior or SensorParams()
     notes: list[str] = []
@@ -292,11 +331,11 @@ def calibrate(
     ranged = replace(prior, force_min_n=min(lo, hi * 0.999), force_max_n=hi)
     try_h = try_hysteresis and "hysteresis" not in chosen and has_both_directions(data)
     runs = [_fit_objective(data, chosen, ranged, "log_r", force_offset, try_h, None)]
-    if objective != "log_r":
+    if objective != Objective.LOG_R:
         runs.append(_fit_objective(data, chosen, ranged, "force", force_offset, try_h, runs[0]))
     for run in runs:
         notes += run.notes
-    pick = runs[-1] if objective == "force" else min(runs, key=lambda r: _rms(r.fit))
+    pick = runs[-1] if objective == Objective.FORCE else min(runs, key=lambda r: _rms(r.fit))
     fit, other = pick.fit, next((r.fit for r in runs if r is not pick), None)
     if other is not None:
         notes.append(
@@ -436,7 +475,9 @@ HEADER = (
 
 
 def calibration_file(
-    calibrations: Iterable[Calibration], model: str = "physics", names: Mapping[str, str] | None = None
+    calibrations: Iterable[Calibration],
+    model: CalibrationModel | str = CalibrationModel.PHYSICS,
+    names: Mapping[str, str] | None = None,
 ) -> CalibrationFile:
     """The calibration file of ``calibrations``: per channel (renamed by ``names``) a
     ``[channel.<name>]`` table (the physical model's parameters, its force range and the
@@ -444,6 +485,7 @@ def calibration_file(
     ``[lookup]`` or ``[curve]`` table; ``[meta]`` names the record and the effects."""
     if model not in MODELS:
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+    model = CalibrationModel(model)
     items = list(calibrations)
     rename = dict(names or {})
     meta_comments = tuple(
@@ -457,8 +499,10 @@ def calibration_file(
     conversions: dict[str, ConversionTable] = {}
     for cal in items:
         name = rename.get(cal.channel, cal.channel)
-        kind = cal.best if model == "auto" else model
-        if model == "curve":  # the best static curve with drift correction, whatever else ranks first
+        kind = cal.best if model == CalibrationModel.AUTO else model
+        if (
+            model == CalibrationModel.CURVE
+        ):  # the best static curve with drift correction, whatever else ranks first
             if not cal.candidates:
                 raise ValueError(f"channel {cal.channel!r}: no curve could be fitted to the record")
             kind = cal.candidates[0].name
@@ -522,7 +566,9 @@ def calibration_file(
 
 
 def calibration_toml(
-    calibrations: Iterable[Calibration], model: str = "physics", names: Mapping[str, str] | None = None
+    calibrations: Iterable[Calibration],
+    model: CalibrationModel | str = CalibrationModel.PHYSICS,
+    names: Mapping[str, str] | None = None,
 ) -> str:
     """The text of ``calibration_file(calibrations, model, names)`` (``docs/calibration.md``):
     the gateway's configuration reads its ``[channel.<name>]``, ``[line.<name>]``,

@@ -9,7 +9,7 @@ import click
 
 from ..analysis.calibration import (
     MODELS,
-    OBJECTIVE_CHOICES,
+    OBJECTIVE_OPTIONS,
     OFFSET_CHOICES,
     calibrate,
     format_report,
@@ -40,7 +40,7 @@ from .common import parse_assignments
 )
 @click.option(
     "--objective",
-    type=click.Choice(tuple(c.replace("_", "-") for c in OBJECTIVE_CHOICES)),
+    type=click.Choice(tuple(OBJECTIVE_OPTIONS)),
     default="auto",
     show_default=True,
     help="what the physical model's fit minimises: log-r (log-resistance residuals weighted by the "
@@ -158,7 +158,7 @@ def calibrate_cmd(
                     prior,
                     record_name=str(record_path),
                     metadata=record.metadata,
-                    objective=objective.replace("-", "_"),
+                    objective=OBJECTIVE_OPTIONS[objective],
                     force_offset=force_offset,
                 )
             )
