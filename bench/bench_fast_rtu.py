@@ -10,7 +10,7 @@ at a time):
    5 + 120 byte answer, check address, function, byte count and CRC, unpack the 60 values;
    frames per second. The device in mN mode for the skin60-mn line, in counts for the other.
 2. **gateway, skin60-mn**: the real gateway (``Poller`` with the real ``ModbusTransport`` on a
-   ``kind = "rtu"`` bus at 4,000,000 baud, ``poll_interval_s = 0.001``: polls back to back),
+   ``kind = "rtu"`` bus at 4,000,000 baud, ``poll_interval_s = 0``: polls back to back),
    the shipped profile ``skin60-mn`` (force in mN passed through) with drift correction on
    (``drift = { creep_fraction = 0.05, creep_tau_s = 20.0 }`` in the device's frame table),
    every frame published to the web stream (a ``FrameHub`` attached to a loop in its own
@@ -61,10 +61,11 @@ import serial
 from gateway.config import GatewayConfig
 from gateway.config.mqtt import MqttConfig
 from gateway.config.parser import parse_config
-from gateway.modbus.client import ModbusTransport
+from gateway.modbus.backends import open_transport
 from gateway.modbus.vendor_fc import VendorRead
 from gateway.mqtt.publisher import MqttPublisher
 from gateway.runtime.poller import Poller
+from gateway.runtime.priority import yield_to_poll_loop
 from gateway.runtime.snapshot import GatewaySnapshot
 from gateway.web import FrameHub
 
@@ -159,7 +160,7 @@ def bare_loop(port: str, seconds: float, output_mode: int) -> tuple[float, int]:
 
 
 # ---------------------------------------------------------------------------- the gateway
-def gateway_config(port: str, profile: str, mqtt_port: int | None) -> GatewayConfig:
+def gateway_config(port: str, profile: str, mqtt_port: int | None, client: str = "direct") -> GatewayConfig:
     """One RTU bus at 4,000,000 baud polled back to back; the skin with drift correction."""
     drift = f"drift = {DRIFT}" if profile == "skin60-mn" else ""
     text = f"""
@@ -167,10 +168,11 @@ def gateway_config(port: str, profile: str, mqtt_port: int | None) -> GatewayCon
 name = "skin"
 kind = "rtu"
 serial_port = "{port}"
+serial_client = "{client}"
 baudrate = {BAUD}
 parity = "N"
 stopbits = 1
-poll_interval_s = 0.001
+poll_interval_s = 0
 timeout_s = 1.0
 
 [[bus.device]]
@@ -199,7 +201,11 @@ class _StreamThread:
         self.device = device
         self.frames = 0
         self._loop = asyncio.new_event_loop()
-        self._thread = threading.Thread(target=self._loop.run_forever, name="bench-web", daemon=True)
+        self._thread = threading.Thread(target=self._serve, name="bench-web", daemon=True)
+
+    def _serve(self) -> None:
+        yield_to_poll_loop()  # as the web server's thread does
+        self._loop.run_forever()
 
     def __enter__(self) -> _StreamThread:
         self._thread.start()
@@ -263,7 +269,7 @@ async def gateway_round(config: GatewayConfig, seconds: float, run: GatewayRun) 
 
     poller.holder.subscribe(count)
     if publisher is not None:
-        poller.holder.subscribe(publisher.on_snapshot)
+        poller.holder.subscribe(publisher.on_snapshot, derive=publisher.derivations)
         publisher.start()
     with _StreamThread(hub, name) as stream:
         try:
@@ -297,7 +303,7 @@ async def transport_only(config: GatewayConfig, seconds: float) -> tuple[float, 
     """Diagnostic: the gateway's ``ModbusTransport`` alone (pymodbus' client and framing,
     our checks), the 0x42 read back to back: no conversion, no publishing."""
     read = VendorRead(FC)
-    async with ModbusTransport(config.buses[0]) as transport:
+    async with open_transport(config.buses[0]) as transport:
         t_end = time.perf_counter() + WARM_UP_S
         while time.perf_counter() < t_end:
             await transport.read_vendor(DEVICE_ID, read, 0, POINTS)
@@ -310,7 +316,8 @@ async def transport_only(config: GatewayConfig, seconds: float) -> tuple[float, 
 
 # ---------------------------------------------------------------------------- processes
 @contextlib.contextmanager
-def _pty_pair(folder: Path) -> Iterator[tuple[str, str]]:
+def _pty_pair(folder: Path) -> Iterator[tuple[str, str, int]]:
+    """A socat pty pair: the two ends' paths and socat's pid."""
     socat = shutil.which("socat")
     if socat is None:
         raise RuntimeError("socat is not installed (`make sysdeps` installs it)")
@@ -325,7 +332,7 @@ def _pty_pair(folder: Path) -> Iterator[tuple[str, str]]:
             if proc.poll() is not None or time.monotonic() > deadline:
                 raise RuntimeError("socat did not make the pty pair")
             time.sleep(0.02)
-        yield str(a), str(b)
+        yield str(a), str(b), proc.pid
     finally:
         _stop(proc)
 
@@ -360,16 +367,21 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
 
 
 @contextlib.contextmanager
-def _pinned(device_pid: int) -> Iterator[str]:
-    """The device on the last core, this process on the others (restored afterwards)."""
+def _pinned(device_pid: int, wire_pid: int) -> Iterator[str]:
+    """The device and the wire (socat) on the last core, this process (and what it starts:
+    the broker) on the others, restored afterwards. On real hardware neither the device nor
+    the wire runs on the host's CPU; here they share a core, so that the reader's work cannot
+    hold up the relay of an answer (socat is an ordinary process: on the reader's core it
+    would wait for the reader's time slice, which no UART or USB interrupt does)."""
     cores = sorted(os.sched_getaffinity(0))
     if len(cores) < 2:
         yield "one core: device, socat and reader share it"
         return
     os.sched_setaffinity(device_pid, {cores[-1]})
+    os.sched_setaffinity(wire_pid, {cores[-1]})
     os.sched_setaffinity(0, set(cores[:-1]))
     try:
-        yield f"device pinned to core {cores[-1]}, reader to {cores[:-1]}, socat unpinned"
+        yield f"device and socat pinned to core {cores[-1]}, reader (and broker) to {cores[:-1]}"
     finally:
         os.sched_setaffinity(0, set(cores))
 
@@ -388,9 +400,9 @@ async def _bench() -> None:
     slot = MEASURE_S / ROUNDS
     with contextlib.ExitStack() as stack:
         folder = Path(stack.enter_context(tempfile.TemporaryDirectory()))
-        a, b = stack.enter_context(_pty_pair(folder))
+        a, b, wire_pid = stack.enter_context(_pty_pair(folder))
         device = stack.enter_context(_skin_device(b))
-        cores = stack.enter_context(_pinned(device.pid))
+        cores = stack.enter_context(_pinned(device.pid, wire_pid))
         mqtt_port: int | None = None
         if _have_mosquitto():
             broker, mqtt_port = _start_mosquitto(folder)

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import click
 
 from ..errors import GatewayError
-from ..modbus.client import ModbusTransport
+from ..modbus.backends import open_transport
 from ..modbus.endpoint import Endpoint, TlsSettings
 from ..modbus.scan import analyse
 from ..modbus.scan_read import BISECT_CODES as BISECT_CODES
@@ -70,14 +70,11 @@ class ScanEndpoint:
     timeout_s: float = 1.0
     name: str = "scan"
     tls: TlsSettings | None = None
-
-
-def _modbus_transport(bus: Endpoint) -> Transport:
-    return ModbusTransport(bus)
+    serial_client: str = "pymodbus"
 
 
 #: Builds the transport of a scan; tests put an in-process bus here.
-transport_factory: Callable[[Endpoint], Transport] = _modbus_transport
+transport_factory: Callable[[Endpoint], Transport] = open_transport
 
 
 # --------------------------------------------------------------------------- ranges

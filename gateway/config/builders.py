@@ -105,6 +105,7 @@ def bus_config_for(
     max_read_registers: int = MAX_READ_REGISTERS,
     backoff_initial_s: float = 0.1,
     backoff_max_s: float = 2.0,
+    serial_client: str | None = None,
 ) -> BusConfig:
     """A bus of already built devices, validated as a ``[[bus]]`` table (see ``BusConfig``)."""
     table: dict[str, Any] = {
@@ -119,6 +120,7 @@ def bus_config_for(
     }
     if kind == "rtu":
         table.update(serial_port=serial_port, baudrate=baudrate, parity="N", stopbits=1, bytesize=8)
+        table.update(serial_client=serial_client)
     else:
         table.update(host=host, port=port)
     if tls is not None:

@@ -32,6 +32,7 @@ from .schema import (
     POLL_INTERVAL_S,
     PORT,
     RETRIES,
+    SERIAL_CLIENTS,
     STANDARD_BAUDRATES,
     STOPBITS,
     TIMEOUT_S,
@@ -58,6 +59,7 @@ _BUS_KEYS: Final = (
     "parity",
     "stopbits",
     "bytesize",
+    "serial_client",
     "timeout_s",
     "retries",
     "poll_interval_s",
@@ -67,7 +69,7 @@ _BUS_KEYS: Final = (
     "tls",
     "device",
 )
-_SERIAL_KEYS: Final = ("serial_port", "baudrate", "parity", "stopbits", "bytesize")
+_SERIAL_KEYS: Final = ("serial_port", "baudrate", "parity", "stopbits", "bytesize", "serial_client")
 _NETWORK_KEYS: Final = ("host", "port")
 _TLS_KEYS: Final = ("ca_file", "cert_file", "key_file", "server_hostname", "verify")
 
@@ -164,6 +166,7 @@ def parse_bus(
     port: int | None = None
     serial_port: str | None = None
     baudrate, parity, stopbits, bytesize = 19200, "E", 1, 8
+    serial_client = SERIAL_CLIENTS[0]
     tls: TlsConfig | None = None
     if kind == "rtu":
         serial_port = table.required_string("serial_port", "a serial device such as /dev/ttyUSB0")
@@ -178,6 +181,7 @@ def parse_bus(
         parity = table.choice("parity", parity, PARITIES)
         stopbits = table.integer("stopbits", stopbits, *STOPBITS)
         bytesize = table.integer("bytesize", bytesize, *BYTESIZE)
+        serial_client = table.choice("serial_client", serial_client, SERIAL_CLIENTS)
     else:
         host = _network_host(table, "host")
         port = table.integer("port", 802 if kind == "tls" else 502, *PORT)
@@ -230,6 +234,7 @@ def parse_bus(
         parity=parity,
         stopbits=stopbits,
         bytesize=bytesize,
+        serial_client=serial_client,
         tls=tls,
         timeout_s=timeout_s,
         retries=retries,

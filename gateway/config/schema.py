@@ -34,6 +34,7 @@ __all__ = [
     "MAX_POSITION_MM",
     "NETWORK_KINDS",
     "PARITIES",
+    "SERIAL_CLIENTS",
     "STANDARD_BAUDRATES",
     "BusConfig",
     "ChannelConfig",
@@ -69,6 +70,9 @@ STANDARD_BAUDRATES: Final = (
     4000000,
 )
 PARITIES: Final = ("N", "E", "O")
+#: Who frames Modbus RTU on a serial line: pymodbus' client, or the gateway's own direct
+#: framing (``gateway.modbus.rtu_line``) for lines polled thousands of times a second.
+SERIAL_CLIENTS: Final = ("pymodbus", "direct")
 MAX_CHANNELS: Final = 256
 #: Channel positions must lie within this many millimetres of the origin.
 MAX_POSITION_MM: Final = 10_000.0
@@ -81,7 +85,8 @@ RETRIES: Final = (0, 10)
 STOPBITS: Final = (1, 2)
 BYTESIZE: Final = (7, 8)
 TIMEOUT_S: Final = Interval(0.0, 60.0, low_inclusive=False)
-POLL_INTERVAL_S: Final = Interval(0.001, 3600.0, low_inclusive=True)
+#: 0 polls back to back: the next poll starts as soon as the last answer is in
+POLL_INTERVAL_S: Final = Interval(0.0, 3600.0, low_inclusive=True)
 BACKOFF_INITIAL_S: Final = Interval(0.0, 60.0, low_inclusive=False)
 BACKOFF_MAX_S: Final = 3600.0
 POSITION_MM: Final = Interval(-MAX_POSITION_MM, MAX_POSITION_MM, low_inclusive=True)
@@ -304,10 +309,13 @@ class BusConfig:
     backoff_initial_s: float
     backoff_max_s: float
     devices: tuple[DeviceConfig, ...]
+    #: who frames RTU on the serial line (``SERIAL_CLIENTS``); only ``kind = "rtu"`` uses it
+    serial_client: str = "pymodbus"
 
     def __post_init__(self) -> None:
         where = f"bus {self.name!r}"
         check_choice(where, "kind", self.kind, BUS_KINDS)
+        check_choice(where, "serial_client", self.serial_client, SERIAL_CLIENTS)
         if self.kind == "rtu":
             if not isinstance(self.serial_port, str) or not self.serial_port.strip():
                 raise ConfigError(f"{where}: serial_port: expected a serial device such as /dev/ttyUSB0")

@@ -66,4 +66,9 @@ class Endpoint(Protocol):
     def tls(self) -> TlsSettings | None: ...
 
     @property
+    def serial_client(self) -> str:
+        """Who frames RTU on a serial line: "pymodbus" or "direct" (``rtu_line``)."""
+        ...
+
+    @property
     def timeout_s(self) -> float: ...

@@ -235,7 +235,9 @@ class Transport(abc.ABC):
         assert isinstance(words, Sequence)
         if len(words) != count:
             raise DecodeError(f"{what}: asked for {count} words, got {len(words)}")
-        if not self.values_are_16_bit and any(not 0 <= int(w) <= 0xFFFF for w in words):
+        if self.values_are_16_bit:
+            return words if type(words) is list else list(words)
+        if any(not 0 <= int(w) <= 0xFFFF for w in words):
             raise DecodeError(f"{what}: a word outside 0..65535")
         return [int(w) for w in words]
 

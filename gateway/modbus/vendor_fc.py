@@ -20,6 +20,7 @@ The data are read as big-endian 16-bit words. ``count`` in the methods below alw
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 
 from ..errors import ConfigError, DecodeError, GatewayError
@@ -136,7 +137,7 @@ class VendorRead:
             raise DecodeError(f"byte count {stated} but {len(payload)} data bytes follow")
         if stated != 2 * count:
             raise DecodeError(f"byte count {stated}, expected {2 * count} for {count} words")
-        return [int.from_bytes(payload[i : i + 2], "big") for i in range(0, stated, 2)]
+        return list(struct.unpack_from(f">{count}H", payload))
 
     def response_size(self, head: bytes) -> int | None:
         """Length of the whole answer after the function code (byte count + data, bytes),

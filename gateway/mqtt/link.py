@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector, CollectorRegistry
 
 from ..config import GatewayConfig
-from ..runtime.snapshot import GatewaySnapshot
+from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from .publisher import MqttPublisher, MqttStats
 
 __all__ = ["MqttLink"]
@@ -55,6 +55,12 @@ class MqttLink(Collector):
             )
             with self._lock:
                 self._publisher = publisher
+
+    @property
+    def derivations(self) -> tuple[Callable[[DeviceSnapshot], object], ...]:
+        """What the current publisher derives from every device snapshot (none without one)."""
+        publisher = self._publisher
+        return () if publisher is None else publisher.derivations
 
     def on_snapshot(self, snapshot: GatewaySnapshot) -> None:
         publisher = self._publisher

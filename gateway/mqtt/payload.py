@@ -52,11 +52,14 @@ __all__ = [
     "decode_binary",
     "encode_binary",
     "encode_json",
+    "encode_json_frame",
     "frame_dict",
+    "json_body",
 ]
 
 BINARY_MAGIC: Final = b"TGF1"
 _HEADER: Final = struct.Struct("<4sQdddddd HH")
+_LABELS: Final = tuple(STATUS_LABELS)
 
 
 class FrameFields(TypedDict):
@@ -108,12 +111,28 @@ def frame_dict(source: DeviceSnapshot | Frame, sequence: int) -> FrameFields:
         "force_n": list(f.force_n),
         "force_static_n": list(f.force_static_n),
         "resistance_ohm": list(f.resistance_ohm),
-        "status": [s.label for s in f.status],
+        "status": [_LABELS[s] for s in f.status],
     }
 
 
 def encode_json(frame: FrameFields) -> bytes:
     return json.dumps(frame, separators=(",", ":"), allow_nan=False).encode("utf-8")
+
+
+def json_body(snap: DeviceSnapshot) -> bytes:
+    """The JSON frame of ``snap`` without its leading ``sequence`` member (``{"device":...}``):
+    encoded once per snapshot (``DeviceSnapshot.derived``; the poll loop computes it while it
+    waits for the next answer when MQTT publishes JSON), the sequence spliced in per message
+    by ``encode_json_frame``."""
+    fields: dict[str, Any] = dict(frame_dict(frame_of(snap), 0))
+    del fields["sequence"]
+    return json.dumps(fields, separators=(",", ":"), allow_nan=False).encode("utf-8")
+
+
+def encode_json_frame(snap: DeviceSnapshot, sequence: int) -> bytes:
+    """``encode_json(frame_dict(snap, sequence))``, byte for byte, from the snapshot's one
+    ``json_body``."""
+    return b'{"sequence":%d,%s' % (int(sequence), snap.derived(json_body)[1:])
 
 
 def _nan(value: float | None) -> float:

@@ -35,8 +35,9 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 from ..config import GatewayConfig
 from ..config.mqtt import MqttConfig
 from ..runtime.frame import frame_of
+from ..runtime.priority import yield_to_poll_loop
 from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
-from .payload import encode_binary, encode_json, frame_dict
+from .payload import encode_binary, encode_json_frame, frame_dict, json_body
 
 __all__ = ["MqttPublisher", "MqttStats", "meta_dict"]
 
@@ -153,6 +154,12 @@ class MqttPublisher:
             self._meta_due = True
             self._cond.notify()
 
+    @property
+    def derivations(self) -> tuple[Callable[[DeviceSnapshot], object], ...]:
+        """What this publisher derives from every device snapshot (for ``SnapshotHolder.
+        subscribe``'s ``derive``): the frame, and its JSON body when publishing JSON."""
+        return (frame_of,) if self.settings.encoding == "binary" else (frame_of, json_body)
+
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
         self._stopping = False
@@ -234,6 +241,7 @@ class MqttPublisher:
                 self._cond.wait(seconds)
 
     def _run(self) -> None:
+        yield_to_poll_loop()
         backoff = BACKOFF_INITIAL_S
         socket_open = False
         while True:
@@ -276,9 +284,10 @@ class MqttPublisher:
             for _, device in config.devices():
                 payload = json.dumps(meta_dict(config, device.name, self.settings.encoding))
                 self._client.publish(self.settings.topic(device.name, "meta"), payload, qos=1, retain=True)
+        binary = self.settings.encoding == "binary"
         for name, seq, snap in batch:
-            frame = frame_dict(frame_of(snap), seq)  # built once per snapshot, shared with the page
-            data = encode_binary(frame) if self.settings.encoding == "binary" else encode_json(frame)
+            # built once per snapshot (by the poll loop, see ``derivations``), shared with the page
+            data = encode_binary(frame_dict(frame_of(snap), seq)) if binary else encode_json_frame(snap, seq)
             info = self._client.publish(self.settings.topic(name, "frame"), data, qos=self.settings.qos)
             with self._cond:
                 if info.rc != mqtt.MQTT_ERR_SUCCESS:

@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 from ..config import BusConfig, DeviceConfig
 from ..errors import ConfigError
-from ..modbus.client import ModbusTransport
+from ..modbus.backends import open_transport
 from ..modbus.register_map import DeviceWrite
 from ..modbus.transport import Transport
 from .identity import verify_device
@@ -34,7 +34,7 @@ async def run_action(
     device: DeviceConfig,
     name: str,
     *,
-    transport_factory: Callable[[BusConfig], Transport] = ModbusTransport,
+    transport_factory: Callable[[BusConfig], Transport] = open_transport,
 ) -> tuple[DeviceWrite, ...]:
     """Make the action's writes on the device; returns them. Raises ``ConfigError`` for an
     unknown action and the transport's ``DeviceError`` on any failure."""

@@ -2,7 +2,8 @@
 
 Each bus task connects its transport (``gateway.modbus.transport.Transport``: the pymodbus
 client in production, an in-process virtual bus in unit tests), then every
-``poll_interval_s`` polls each of its devices: the coalesced reads of ``read_plan``, one
+``poll_interval_s`` (0: back to back, each cycle as soon as the last one ends) polls each of
+its devices that is not backing off: the coalesced reads of ``read_plan``, one
 request at a time, each retried up to ``retries`` times on a timeout or a garbled answer.
 The registers go through the pure ``processor`` and a new device snapshot is published
 after every device poll.
@@ -36,7 +37,7 @@ import logging
 import math
 import random
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from ..config import BusConfig, DeviceConfig
@@ -48,7 +49,7 @@ from ..errors import (
     DeviceMismatchError,
     DeviceTimeoutError,
 )
-from ..modbus.client import ModbusTransport
+from ..modbus.backends import open_transport
 from ..modbus.image import RegisterKind
 from ..modbus.plan import MERGE_GAP, ReadRequest, device_plan
 from ..modbus.register_map import MAX_READ_REGISTERS
@@ -110,7 +111,8 @@ class BusWorker:
         runners: list[DeviceRunner],
         publish: Callable[[DeviceRunner, DeviceSnapshot], None],
         *,
-        transport_factory: Callable[[BusConfig], Transport] = ModbusTransport,
+        transport_factory: Callable[[BusConfig], Transport] = open_transport,
+        derivations: Callable[[], Sequence[Callable[[DeviceSnapshot], object]]] = tuple,
         rng: random.Random | None = None,
         wall_clock: Callable[[], float] = time.time,
         monotonic: Callable[[], float] = time.monotonic,
@@ -118,6 +120,7 @@ class BusWorker:
         self.bus = bus
         self.runners = runners
         self._publish = publish
+        self._derivations = derivations
         self.transport = transport_factory(bus)
         self._quiet_s = self.transport.quiet_after_send_s
         self._rng = rng or random.Random()
@@ -202,20 +205,27 @@ class BusWorker:
             return False
         self.settle_now(runner)
         runner.pending = Conversion(
-            runner.processor, runner.state, reads, self._wall(), self._mono(), time.monotonic() - t0
+            runner.processor,
+            runner.state,
+            reads,
+            self._wall(),
+            self._mono(),
+            time.monotonic() - t0,
+            derive=self._derivations(),
         )
         return True
 
     async def _read_overlapping(self, runner: DeviceRunner, req: ReadRequest) -> list[int]:
-        """``_read``, with one step of a deferred conversion run while the device answers.
+        """``_read``, with the deferred conversions run while the device answers.
 
-        The step is a timer due when the request is out (at once over a network, after the
-        request's own wire time on a serial line); the event loop runs a due timer on its
+        The first step is a timer due when the request is out (at once over a network, after
+        the request's own wire time on a serial line); the event loop runs a due timer on its
         next pass, after that pass's I/O callbacks. By then the request has been written:
-        the read runs without suspending up to the wait for the answer. On a serial line
-        the wait also leaves the CPU to whatever carries the bytes (a relay such as socat,
-        in tests) while they go out. Should the read suspend earlier, the step merely runs
-        before the send.
+        the read runs without suspending up to the wait for the answer. Each further step
+        follows on the next pass (``call_soon``), so an answer that comes in meanwhile waits
+        for one step at most. On a serial line the wait also leaves the CPU to whatever
+        carries the bytes (a relay such as socat, in tests) while they go out. Should the
+        read suspend earlier, the first step merely runs before the send.
         """
         loop = asyncio.get_running_loop()
         loop.call_at(loop.time() + self._quiet_s, self._step_pending)
@@ -225,10 +235,13 @@ class BusWorker:
         return any(r.pending is not None for r in self.runners)
 
     def _step_pending(self) -> None:
-        """One step of the oldest deferred conversion on this bus."""
+        """One step of the oldest deferred conversion on this bus; the next step on the
+        event loop's next pass while any is left."""
         for runner in self.runners:
             if runner.pending is not None:
                 self._advance(runner, to_end=False)
+                if self._has_pending():
+                    asyncio.get_running_loop().call_soon(self._step_pending)
                 return
 
     def settle_all(self) -> None:
@@ -433,11 +446,18 @@ class BusWorker:
                 next_cycle += interval
                 if next_cycle < now:  # overran: start again from now, no catch-up burst
                     next_cycle = now
+                # every device backing off: nothing to poll before the first is due (with
+                # poll_interval_s = 0 the loop would otherwise spin)
+                next_cycle = max(next_cycle, self._first_due())
             if next_cycle > now:
                 self.settle_all()
                 await asyncio.sleep(next_cycle - now)
             else:
                 await asyncio.sleep(0)
+
+    def _first_due(self) -> float:
+        """When the first device of the bus may be polled again (its back-off; monotonic s)."""
+        return min((r.next_attempt for r in self.runners), default=0.0)
 
     def start(self) -> None:
         self._stopping = False

@@ -4,7 +4,7 @@ works on the next answer (see ``bus``)."""
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 from ..modbus.image import RegisterImage, RegisterKind, decode_sample
 from .processor import DeviceProcessor, DeviceState
@@ -16,7 +16,10 @@ __all__ = ["Conversion"]
 class Conversion:
     """One poll's registers on their way to a snapshot, in three steps: decode, track
     (resistances and drift-corrected forces), finish (statuses, array quantities, the
-    snapshot). The poller runs one step at a time while a device works on an answer.
+    snapshot), and with ``derive`` a fourth: what the poller's subscribers derive from every
+    snapshot (its published ``Frame``, its encodings), computed once
+    (``DeviceSnapshot.derived``). The poller runs one step at a time while a device works on
+    an answer.
 
     ``wall_time_s`` (Unix) and ``host_time_s`` (monotonic) are taken when the reads end, so
     that the result does not depend on when the steps run. ``state`` is the device state
@@ -31,8 +34,10 @@ class Conversion:
         wall_time_s: float,
         host_time_s: float,
         reads_duration_s: float,
+        *,
+        derive: Sequence[Callable[[DeviceSnapshot], object]] = (),
     ) -> None:
-        self._steps = self._run(processor, state, reads, wall_time_s, host_time_s)
+        self._steps = self._run(processor, state, reads, wall_time_s, host_time_s, derive)
         self.result: tuple[DeviceSnapshot, DeviceState] | None = None
         self.duration_s = reads_duration_s  # reads, plus the time spent in each step
 
@@ -43,12 +48,18 @@ class Conversion:
         reads: list[tuple[RegisterKind, int, list[int]]],
         wall_time_s: float,
         host_time_s: float,
+        derive: Sequence[Callable[[DeviceSnapshot], object]],
     ) -> Iterator[tuple[DeviceSnapshot, DeviceState] | None]:
         raw = decode_sample(processor.device, RegisterImage.from_reads(reads))
         yield None
         tracked = processor.track(state, raw, wall_time_s, host_time_s)
         yield None
-        yield processor.finish(tracked)
+        result = processor.finish(tracked)
+        if derive:
+            yield None
+            for fn in derive:
+                result[0].derived(fn)
+        yield result
 
     def step(self) -> bool:
         """Run the next step; True once the result is there. Raises what a step raises."""

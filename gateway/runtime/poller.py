@@ -16,11 +16,11 @@ import logging
 import random
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 
 from ..config import BusConfig, GatewayConfig
-from ..modbus.client import ModbusTransport
+from ..modbus.backends import open_transport
 from ..modbus.plan import MERGE_GAP, device_plan
 from ..modbus.transport import Transport
 from .bus import BusWorker, DeviceRunner
@@ -31,16 +31,26 @@ from .snapshot import DeviceSnapshot, GatewaySnapshot
 log = logging.getLogger(__name__)
 
 
+#: What a subscriber derives from every device snapshot (a module-level function).
+Derivation = Callable[[DeviceSnapshot], object]
+
+
 class SnapshotHolder:
     """Holds the latest ``GatewaySnapshot``; safe to read from any thread (the exporter's).
 
-    ``subscribe`` registers a callback run (in the poller's thread) after each publish.
+    ``subscribe`` registers a callback run (in the poller's thread) after each publish; a
+    subscriber that derives something from every device snapshot (the page's stream and MQTT
+    publish each poll's ``Frame`` and its encodings) names those functions in ``derive``, and
+    the poll loop computes them (``DeviceSnapshot.derived``, once per snapshot) while it waits
+    for the next answer, instead of the subscriber's thread computing them while the poll
+    loop needs the CPU.
     """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._snapshot = GatewaySnapshot()
         self._callbacks: list[Callable[[GatewaySnapshot], None]] = []
+        self._derive: list[Callable[[], Sequence[Derivation]]] = []
 
     def get(self) -> GatewaySnapshot:
         with self._lock:
@@ -56,9 +66,28 @@ class SnapshotHolder:
             except Exception:
                 log.exception("snapshot subscriber failed")
 
-    def subscribe(self, callback: Callable[[GatewaySnapshot], None]) -> None:
+    def subscribe(
+        self,
+        callback: Callable[[GatewaySnapshot], None],
+        *,
+        derive: Sequence[Derivation] | Callable[[], Sequence[Derivation]] = (),
+    ) -> None:
+        """Run ``callback`` after each publish. ``derive``: the functions the subscriber
+        applies to every device snapshot (``DeviceSnapshot.derived``), or a callable that
+        says which they are now (a publisher whose settings can change)."""
+        source = derive if callable(derive) else (lambda: derive)
         with self._lock:
             self._callbacks.append(callback)
+            self._derive.append(source)
+
+    @property
+    def derivations(self) -> tuple[Derivation, ...]:
+        """What the subscribers derive from every device snapshot now (module-level
+        functions, each once)."""
+        out: list[Derivation] = []
+        for source in self._derive:
+            out.extend(fn for fn in source() if fn not in out)
+        return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -79,7 +108,7 @@ class Poller:
         config: GatewayConfig,
         holder: SnapshotHolder | None = None,
         *,
-        transport_factory: Callable[[BusConfig], Transport] = ModbusTransport,
+        transport_factory: Callable[[BusConfig], Transport] = open_transport,
         rng: random.Random | None = None,
         wall_clock: Callable[[], float] = time.time,
         monotonic: Callable[[], float] = time.monotonic,
@@ -131,6 +160,7 @@ class Poller:
                     runners,
                     self._on_device_snapshot,
                     transport_factory=self._transport_factory,
+                    derivations=lambda: self.holder.derivations,
                     rng=self._rng,
                     wall_clock=self._wall,
                     monotonic=self._mono,

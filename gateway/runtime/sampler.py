@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable
 
 from ..config import BusConfig, DeviceConfig
-from ..modbus.client import ModbusTransport
+from ..modbus.backends import open_transport
 from ..modbus.image import RawSample, RegisterImage, RegisterKind, decode_sample
 from ..modbus.plan import MERGE_GAP, device_plan
 from ..modbus.transport import Transport
@@ -26,7 +26,7 @@ async def sample_device(
     device: DeviceConfig,
     duration_s: float,
     *,
-    transport_factory: Callable[[BusConfig], Transport] = ModbusTransport,
+    transport_factory: Callable[[BusConfig], Transport] = open_transport,
 ) -> list[tuple[float, RawSample]]:
     """Poll ``device`` every ``bus.poll_interval_s`` for ``duration_s`` seconds: (host
     monotonic time, sample) pairs. Raises the transport's ``DeviceError`` on any failure

@@ -149,7 +149,7 @@ class FrameHub:
         self.dropped_total: dict[str, int] = {}
         self.inbox_dropped = 0
         if holder is not None:
-            holder.subscribe(self.on_snapshot)
+            holder.subscribe(self.on_snapshot, derive=(frame_of,))
             self.on_snapshot(holder.get())
 
     # ------------------------------------------------------------------ poller side (any thread)

@@ -13,12 +13,18 @@ from test_gateway_tcp import Recorder, array_device, drift_errors, holds_array, 
 from waiting import until as wait_for_event
 
 from gateway.config import bus_config_for, gateway_config_for
-from gateway.modbus.client import ModbusTransport
+from gateway.modbus.backends import open_transport
 from gateway.runtime.poller import Poller, SnapshotHolder
 from gateway.runtime.snapshot import ChannelStatus
 from sim_device import ArrayConfig, SimArray, serve_serial
 
 BAUD = 115200
+
+
+@pytest.fixture(params=["pymodbus", "direct"])
+def serial_client(request: pytest.FixtureRequest) -> str:
+    """Who frames RTU on the gateway's side: pymodbus' client or the direct one (rtu_line)."""
+    return str(request.param)
 
 
 @pytest.mark.slow  # plays the whole holds scenario (about 7 s)
@@ -51,7 +57,7 @@ async def test_holds_drift_corrected_over_rtu(pty_pair: tuple[str, str]) -> None
     assert r["static_end_n"] > r["static_start_n"] + 0.05, message
 
 
-async def test_two_devices_on_one_line(pty_pair: tuple[str, str]) -> None:
+async def test_two_devices_on_one_line(pty_pair: tuple[str, str], serial_client: str) -> None:
     gw_port, dev_port = pty_pair
     cfg = ArrayConfig(channels=8, columns=4, pitch_mm=2.5, seed=4, scenario="holds", speed=1.0)
     a1, a2 = SimArray(cfg, device_id=1), SimArray(cfg, device_id=2)
@@ -63,6 +69,7 @@ async def test_two_devices_on_one_line(pty_pair: tuple[str, str]) -> None:
             serial_port=gw_port,
             baudrate=BAUD,
             poll_interval_s=0.05,
+            serial_client=serial_client,
         )
         holder = SnapshotHolder()
         async with Poller(gateway_config_for([bus]), holder):
@@ -75,7 +82,7 @@ async def test_two_devices_on_one_line(pty_pair: tuple[str, str]) -> None:
 
             await wait_for_event(ten_polls_each, 10.0, "10 polls of each device", step_s=0.05)
         snap = holder.get()
-        async with ModbusTransport(bus) as transport:
+        async with open_transport(bus) as transport:
             ident = await transport.read_device_identification(2)
     for name in ("first", "second"):
         dev = snap.devices[name]
@@ -88,7 +95,9 @@ async def test_two_devices_on_one_line(pty_pair: tuple[str, str]) -> None:
 
 
 @pytest.mark.slow  # three time-outs through the back-off, then the recovery (about 2.3 s)
-async def test_silent_device_on_a_line_times_out_and_the_other_keeps_going(pty_pair: tuple[str, str]) -> None:
+async def test_silent_device_on_a_line_times_out_and_the_other_keeps_going(
+    pty_pair: tuple[str, str], serial_client: str
+) -> None:
     gw_port, dev_port = pty_pair
     cfg = ArrayConfig(channels=4, columns=2, pitch_mm=2.5, seed=5, scenario="holds", speed=1.0)
     a1, a2 = SimArray(cfg, device_id=1), SimArray(cfg, device_id=2)
@@ -105,6 +114,7 @@ async def test_silent_device_on_a_line_times_out_and_the_other_keeps_going(pty_p
             retries=0,
             backoff_initial_s=0.2,
             backoff_max_s=1.0,
+            serial_client=serial_client,
         )
         holder = SnapshotHolder()
         async with Poller(gateway_config_for([bus]), holder):

@@ -13,7 +13,7 @@ from test_gateway_tcp import array_device
 
 from gateway.config import BusConfig, bus_config_for
 from gateway.errors import DeviceExceptionResponse
-from gateway.modbus.client import ModbusTransport
+from gateway.modbus.backends import open_transport
 from gateway.modbus.vendor_fc import VendorRead
 from sim_device.array import SimArray
 from sim_device.scenarios import Scenario
@@ -30,6 +30,8 @@ from sim_device.skin60 import (
 
 SKIN = VendorRead(0x42)
 BAUD = 115200
+#: RTU on a pty, framed by pymodbus' client or by the direct one (``rtu_line``)
+SERIAL_KINDS = ("rtu-pymodbus", "rtu-direct")
 
 
 def loaded_skin(force_n: float = 3.0) -> Skin60Device:
@@ -40,29 +42,32 @@ def loaded_skin(force_n: float = 3.0) -> Skin60Device:
 @contextlib.asynccontextmanager
 async def skin_bus(kind: str, skin: Skin60Device, pty: tuple[str, str] | None) -> AsyncIterator[BusConfig]:
     device = [array_device(skin.array, "skin", bench=False)]
-    if kind == "rtu":
+    if kind in SERIAL_KINDS:
         assert pty is not None
+        client = kind.removeprefix("rtu-")
         async with serve_skin60_serial(skin, pty[1], BAUD, line_timing=True, tick_s=None):
-            yield bus_config_for("line", "rtu", device, serial_port=pty[0], baudrate=BAUD, timeout_s=1.0)
+            yield bus_config_for(
+                "line", "rtu", device, serial_port=pty[0], baudrate=BAUD, timeout_s=1.0, serial_client=client
+            )
     else:
         framer = "rtu" if kind == "rtu-over-tcp" else "socket"
         async with serve_skin60_tcp(skin, framer=framer, tick_s=None) as server:
             yield bus_config_for("net", kind, device, host="127.0.0.1", port=server.port, timeout_s=1.0)
 
 
-@pytest.fixture(params=["tcp", "rtu-over-tcp", "rtu"])
+@pytest.fixture(params=["tcp", "rtu-over-tcp", "rtu-pymodbus", "rtu-direct"])
 def kind(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
 
 @pytest.fixture
 def pty(kind: str, request: pytest.FixtureRequest) -> tuple[str, str] | None:
-    return request.getfixturevalue("pty_pair") if kind == "rtu" else None  # type: ignore[no-any-return]
+    return request.getfixturevalue("pty_pair") if kind in SERIAL_KINDS else None  # type: ignore[no-any-return]
 
 
 async def test_reads_60_points_switches_to_mn_and_zeroes(kind: str, pty: tuple[str, str] | None) -> None:
     skin = loaded_skin(3.0)
-    async with skin_bus(kind, skin, pty) as bus, ModbusTransport(bus) as transport:
+    async with skin_bus(kind, skin, pty) as bus, open_transport(bus) as transport:
         counts = await transport.read_vendor(1, SKIN, 0, N_POINTS)
         # the sensors creep under the load: the device's counts move by a few between reads
         assert np.max(np.abs(np.array(counts) - skin.points())) <= 5
@@ -94,7 +99,7 @@ async def test_reads_60_points_switches_to_mn_and_zeroes(kind: str, pty: tuple[s
 
 async def test_reads_write_nothing_and_exceptions_map(kind: str, pty: tuple[str, str] | None) -> None:
     skin = loaded_skin(2.0)
-    async with skin_bus(kind, skin, pty) as bus, ModbusTransport(bus) as transport:
+    async with skin_bus(kind, skin, pty) as bus, open_transport(bus) as transport:
         for _ in range(3):
             assert len(await transport.read_vendor(1, SKIN, 0, N_POINTS)) == N_POINTS
         with pytest.raises(DeviceExceptionResponse, match="exception 1 \\(illegal function\\)") as info:

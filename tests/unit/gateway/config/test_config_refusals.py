@@ -144,8 +144,8 @@ BAD_CONFIGS: list[tuple[str, str, tuple[str, ...]]] = [
     ("retries-negative", with_bus("retries = -1"), ("bus[0].retries: -1 is out of range; allowed: 0..10",)),
     (
         "poll-interval",
-        with_bus("poll_interval_s = 0.0001"),
-        ("bus[0].poll_interval_s", "allowed: [0.001, 3600] s"),
+        with_bus("poll_interval_s = -0.001"),
+        ("bus[0].poll_interval_s", "allowed: [0, 3600] s"),
     ),
     ("max-read", with_bus("max_read_registers = 126"), ("bus[0].max_read_registers: 126", "allowed: 1..125")),
     (
