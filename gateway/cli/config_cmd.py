@@ -158,11 +158,13 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
 
 def _bus_line(bus: BusConfig) -> str:
     if bus.kind == "rtu":
-        where = f"rtu {bus.serial_port} {bus.baudrate} {bus.bytesize}{bus.parity}{bus.stopbits}"
+        framing = "the gateway's own RTU framing" if bus.serial_client == "direct" else "pymodbus"
+        where = f"rtu {bus.serial_port} {bus.baudrate} {bus.bytesize}{bus.parity}{bus.stopbits} ({framing})"
     else:
         where = f"{bus.kind} {bus.endpoint}"
+    every = "poll back to back" if bus.poll_interval_s == 0 else f"poll every {bus.poll_interval_s:g} s"
     return (
-        f"bus {bus.name}: {where}, poll every {bus.poll_interval_s:g} s, timeout {bus.timeout_s:g} s, "
+        f"bus {bus.name}: {where}, {every}, timeout {bus.timeout_s:g} s, "
         f"{bus.retries} retries, at most {bus.max_read_registers} registers per read"
     )
 

@@ -123,7 +123,7 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
     poller = Poller(config, holder)
     mqtt = MqttLink(registry)
     mqtt.apply(config)
-    holder.subscribe(mqtt.on_snapshot, derive=lambda: mqtt.derivations)
+    holder.subscribe(mqtt.on_snapshot, derive_now=lambda: mqtt.derivations)
     commands: asyncio.Queue[str] = asyncio.Queue()
     loop = asyncio.get_running_loop()
     handled = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)

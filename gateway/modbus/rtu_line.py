@@ -61,6 +61,9 @@ FC_WRITE_MULTIPLE = 0x10
 FC_MEI = 0x2B
 MEI_DEVICE_ID = 0x0E
 
+#: Readiness without data this many times in a row: the port is gone (pyserial's view too).
+EMPTY_READS_LOST = 3
+
 #: Read Device Identification object ids (MEI type 14) by name, as ``client`` names them.
 DEVICE_ID_OBJECTS: dict[int, str] = {
     0x00: "VendorName",
@@ -157,7 +160,10 @@ class RtuLineTransport(Transport):
         self._waiter: asyncio.Future[bytes] | None = None
         self._expect: tuple[int, int, SizeRule] | None = None  # device id, function, size rule
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._vendor_rules: dict[VendorRead, SizeRule] = {}
+        self._vendor_requests: dict[tuple[VendorRead, int, int], tuple[bytes, SizeRule]] = {}
+        self._empty_reads = 0
+        #: request frames already built (a poll repeats the same few): (device id, PDU) -> frame
+        self._frames: dict[tuple[int, bytes], bytes] = {}
 
     # ------------------------------------------------------------------ connection
     @property
@@ -200,6 +206,7 @@ class RtuLineTransport(Transport):
         with contextlib.suppress(OSError, ValueError):
             port.reset_input_buffer()  # a late answer to an earlier connection's request
         self._buffer.clear()
+        self._empty_reads = 0
         self._loop.add_reader(self._fd, self._on_readable)
 
     async def _close(self) -> None:
@@ -224,8 +231,13 @@ class RtuLineTransport(Transport):
             self._lost(exc)
             return
         if not data:
-            self._lost(EOFError("the port reports readiness but returns no data"))
+            # once: the port was emptied (``_drain``) after the loop saw it readable; again and
+            # again: the line is gone (a tty hung up reads as end of file)
+            self._empty_reads += 1
+            if self._empty_reads > EMPTY_READS_LOST:
+                self._lost(EOFError("the port reports readiness but returns no data"))
             return
+        self._empty_reads = 0
         waiter = self._waiter
         if waiter is None or waiter.done():
             return  # nobody asked: a late answer, dropped
@@ -273,7 +285,11 @@ class RtuLineTransport(Transport):
             self._drain()
             waiter: asyncio.Future[bytes] = loop.create_future()
             self._waiter, self._expect = waiter, (device_id, function_code, rule)
-            request = adu(device_id, pdu)
+            request = self._frames.get((device_id, pdu))
+            if request is None:
+                if len(self._frames) >= 256:
+                    self._frames.clear()
+                request = self._frames[(device_id, pdu)] = adu(device_id, pdu)
             written = os.write(self._fd, request)
             if written != len(request):  # a serial driver takes a short request at once
                 raise DeviceConnectionError(f"{what}: wrote {written} of {len(request)} bytes")
@@ -311,6 +327,8 @@ class RtuLineTransport(Transport):
             code = body[2]
             name = EXCEPTION_NAMES.get(code, "unknown exception")
             raise DeviceExceptionResponse(f"{what}: device answered exception {code} ({name})", code)
+        if body[1] != function_code:
+            raise DecodeError(f"{what}: answer has function {body[1]}, expected {function_code}")
         return body[1:]
 
     # ------------------------------------------------------------------ requests
@@ -337,10 +355,12 @@ class RtuLineTransport(Transport):
     async def _read_vendor(
         self, read: VendorRead, device_id: int, address: int, count: int, what: str
     ) -> Sequence[int]:
-        rule = self._vendor_rules.get(read)
-        if rule is None:
-            rule = self._vendor_rules[read] = read.response_size
-        request = bytes((read.function_code,)) + read.request_data(address, count)
+        key = (read, address, count)
+        known = self._vendor_requests.get(key)
+        if known is None:
+            pdu = bytes((read.function_code,)) + read.request_data(address, count)
+            known = self._vendor_requests[key] = (pdu, read.response_size)
+        request, rule = known
         pdu = await self._transact(device_id, request, rule, what)
         try:
             return read.registers(pdu[1:], count)

@@ -89,6 +89,8 @@ class Transport(abc.ABC):
         self.name = name
         self.timeout_s = float(timeout_s)
         self._lock = asyncio.Lock()
+        #: vendor reads already checked: (device id, read, address, count) -> their description
+        self._vendor_reads: dict[tuple[int, VendorRead, int, int], str] = {}
 
     # ------------------------------------------------------------------ what a backend says
     @property
@@ -223,14 +225,20 @@ class Transport(abc.ABC):
         bytes; 127 with a one-byte count field in bytes). An answer of another number of words
         is a ``DecodeError``; an exception answer a ``DeviceExceptionResponse`` (code 1,
         illegal function, from a device that does not know the function code)."""
-        if not 1 <= count <= read.max_count:
-            raise GatewayError(
-                f"word count {count} outside 1..{read.max_count} for function 0x{read.function_code:02X}"
-            )
-        read.request_data(address, count)  # the fields must hold address and count
-        self._check_device_id(device_id)
-        fc = read.function_code
-        what = f"read function 0x{fc:02X} {address}+{count} of device {device_id} on {self.name!r}"
+        key = (device_id, read, address, count)
+        what = self._vendor_reads.get(key)
+        if what is None:  # checked once per request of a read plan, then only looked up
+            if not 1 <= count <= read.max_count:
+                raise GatewayError(
+                    f"word count {count} outside 1..{read.max_count} for function 0x{read.function_code:02X}"
+                )
+            read.request_data(address, count)  # the fields must hold address and count
+            self._check_device_id(device_id)
+            fc = read.function_code
+            what = f"read function 0x{fc:02X} {address}+{count} of device {device_id} on {self.name!r}"
+            if len(self._vendor_reads) >= 256:
+                self._vendor_reads.clear()
+            self._vendor_reads[key] = what
         words = await self._call(what, self._read_vendor(read, device_id, address, count, what))
         assert isinstance(words, Sequence)
         if len(words) != count:

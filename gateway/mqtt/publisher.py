@@ -48,6 +48,8 @@ BACKOFF_MAX_S = 30.0
 KEEPALIVE_S = 15
 LOOP_TIMEOUT_S = 0.02
 STOP_FLUSH_S = 5.0
+#: QoS 1 frames sent and not yet acknowledged, at most (paho's default window)
+INFLIGHT_WINDOW = 20
 
 
 @dataclass(frozen=True)
@@ -200,6 +202,7 @@ class MqttPublisher:
             )
             client.tls_insecure_set(not s.tls.verify)
         client.max_queued_messages_set(s.queue_frames)
+        client.max_inflight_messages_set(INFLIGHT_WINDOW)
         client.on_connect = self._on_connect
         client.on_disconnect = self._on_disconnect
         client.on_publish = self._on_publish
@@ -278,8 +281,11 @@ class MqttPublisher:
                 return
             meta_due, self._meta_due = self._meta_due, False
             config = self._config
-            batch = list(self._queue)
-            self._queue.clear()
+            # at QoS 1 only as many as the window has room for: the rest wait in this queue
+            # (bounded, oldest dropped), not in paho's, whose every acknowledgement scans all
+            # it holds (a backlog there grows the cost of each frame with the backlog)
+            room = len(self._queue) if self.settings.qos == 0 else INFLIGHT_WINDOW - len(self._in_flight)
+            batch = [self._queue.popleft() for _ in range(max(0, min(room, len(self._queue))))]
         if meta_due:
             for _, device in config.devices():
                 payload = json.dumps(meta_dict(config, device.name, self.settings.encoding))
@@ -299,9 +305,16 @@ class MqttPublisher:
 
     def _finish(self, socket_open: bool) -> None:
         if socket_open and self._connected:
-            self._drain()
-            info = self._client.publish(self.settings.topic("status"), "offline", qos=1, retain=True)
             deadline = time.monotonic() + STOP_FLUSH_S
+            while True:  # what is queued, a window at a time
+                self._drain()
+                with self._cond:
+                    waiting = bool(self._queue) and self._connected
+                if not waiting or time.monotonic() >= deadline:
+                    break
+                if self._client.loop(timeout=LOOP_TIMEOUT_S) != mqtt.MQTT_ERR_SUCCESS:
+                    break
+            info = self._client.publish(self.settings.topic("status"), "offline", qos=1, retain=True)
             while time.monotonic() < deadline and (not info.is_published() or self._in_flight):
                 if self._client.loop(timeout=LOOP_TIMEOUT_S) != mqtt.MQTT_ERR_SUCCESS:
                     break

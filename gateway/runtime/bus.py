@@ -62,6 +62,10 @@ from .snapshot import DeviceSnapshot
 
 log = logging.getLogger(__name__)
 
+#: Back-to-back cycles between two explicit yields to the event loop (a cycle that reads a
+#: device yields while it waits; the yield is for a bus that answers without waiting).
+YIELD_EVERY_CYCLES = 16
+
 #: Modbus exception 6 (server device busy) is worth a retry; other exceptions are not.
 RETRYABLE_EXCEPTION_CODES = frozenset({6})
 
@@ -426,6 +430,7 @@ class BusWorker:
         """Poll forever (until cancelled)."""
         interval = float(self.bus.poll_interval_s)
         next_cycle = self._mono()
+        back_to_back = 0
         while not self._stopping:
             try:
                 # a cycle due at once (the bus is busy back to back) overlaps the previous
@@ -452,8 +457,14 @@ class BusWorker:
             if next_cycle > now:
                 self.settle_all()
                 await asyncio.sleep(next_cycle - now)
+                back_to_back = 0
             else:
-                await asyncio.sleep(0)
+                # a cycle that waited on a device has let the loop run; one that never waited
+                # (an in-process bus) must still let it run now and then
+                back_to_back += 1
+                if back_to_back >= YIELD_EVERY_CYCLES:
+                    back_to_back = 0
+                    await asyncio.sleep(0)
 
     def _first_due(self) -> float:
         """When the first device of the bus may be polled again (its back-off; monotonic s)."""

@@ -3,6 +3,7 @@ works on the next answer (see ``bus``)."""
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Iterator, Sequence
 
@@ -11,6 +12,8 @@ from .processor import DeviceProcessor, DeviceState
 from .snapshot import DeviceSnapshot
 
 __all__ = ["Conversion"]
+
+log = logging.getLogger(__name__)
 
 
 class Conversion:
@@ -58,7 +61,10 @@ class Conversion:
         if derive:
             yield None
             for fn in derive:
-                result[0].derived(fn)
+                try:
+                    result[0].derived(fn)
+                except Exception as exc:  # the subscriber's own thread meets it again and reports it
+                    log.debug("%s of a snapshot of %s failed: %s", fn.__name__, processor.device.name, exc)
         yield result
 
     def step(self) -> bool:

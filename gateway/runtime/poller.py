@@ -70,12 +70,16 @@ class SnapshotHolder:
         self,
         callback: Callable[[GatewaySnapshot], None],
         *,
-        derive: Sequence[Derivation] | Callable[[], Sequence[Derivation]] = (),
+        derive: Sequence[Derivation] = (),
+        derive_now: Callable[[], Sequence[Derivation]] | None = None,
     ) -> None:
         """Run ``callback`` after each publish. ``derive``: the functions the subscriber
-        applies to every device snapshot (``DeviceSnapshot.derived``), or a callable that
-        says which they are now (a publisher whose settings can change)."""
-        source = derive if callable(derive) else (lambda: derive)
+        applies to every device snapshot (``DeviceSnapshot.derived``); or ``derive_now``, asked
+        at each poll which they are now (a publisher whose settings can change)."""
+        if callable(derive) or isinstance(derive, str):
+            raise TypeError("derive: a sequence of functions (one function: derive=(fn,))")
+        fixed = tuple(derive)
+        source = derive_now if derive_now is not None else (lambda: fixed)
         with self._lock:
             self._callbacks.append(callback)
             self._derive.append(source)

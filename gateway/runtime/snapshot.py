@@ -127,11 +127,35 @@ def finite_or_none(
         if values is None or not math.isfinite(values):
             return None
         return float(values) if digits is None else round(float(values), digits)
+    if digits is not None and isinstance(values, np.ndarray) and values.dtype == np.float64:
+        return _rounded_array(values, digits)
     raw = values.tolist() if isinstance(values, np.ndarray) else values
     finite = math.isfinite
     if digits is None:
         return [float(v) if finite(v) else None for v in raw]
     return [round(float(v), digits) if finite(v) else None for v in raw]
+
+
+def _rounded_array(values: NDArray[np.float64], digits: int) -> list[float | None]:
+    """``[round(v, digits) if finite else None for v in values]``, equal value for value, at a
+    quarter of the cost: k = rint(v x 10^digits) is Python's rounded decimal wherever v x
+    10^digits lies further than a few units in the last place from a half (the product's own
+    rounding cannot move it across one) and k is an exact integer (below 2^52); then
+    k / 10^digits, one correctly rounded division, is the double nearest that decimal, as
+    ``round`` gives. The other values (near a half, huge, not finite) go through ``round``."""
+    scale = 10.0**digits
+    flat = np.ravel(values)
+    with np.errstate(invalid="ignore", over="ignore"):
+        scaled = flat * scale
+        k = np.rint(scaled)
+        magnitude = np.abs(scaled)
+        exact = (np.abs(np.abs(scaled - k) - 0.5) > 4.0 * np.spacing(magnitude)) & (magnitude < 2.0**52)
+    out: list[float | None] = (k / scale).tolist()
+    if not exact.all():
+        for i in np.flatnonzero(~exact).tolist():
+            v = float(flat[i])
+            out[i] = round(v, digits) if math.isfinite(v) else None
+    return out
 
 
 _T = TypeVar("_T")

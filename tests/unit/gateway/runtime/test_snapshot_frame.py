@@ -16,6 +16,8 @@ from typing import Any, cast
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from numpy.typing import ArrayLike
 
 from gateway.model import SensorModel, SensorParams
@@ -226,3 +228,41 @@ def test_many_threads_asking_for_the_frame_build_it_exactly_once(monkeypatch: py
         assert builds == 1 and model.calls == 1
         assert all(f is frames[0] for f in frames)
         assert json.loads(encode_frame(cast(Frame, frames[0]), 1, None))["force_n"] == [1.25, None]
+
+
+def _python_rounded(values: list[float], digits: int) -> list[float | None]:
+    return [round(v, digits) if math.isfinite(v) else None for v in values]
+
+
+def _same(got: list[float | None], want: list[float | None]) -> bool:
+    """Equal value for value, None for None, and the sign of a zero kept (JSON prints -0.0)."""
+    return len(got) == len(want) and all(
+        (g is None and w is None)
+        or (g is not None and w is not None and g == w and math.copysign(1.0, g) == math.copysign(1.0, w))
+        for g, w in zip(got, want, strict=True)
+    )
+
+
+@given(
+    st.lists(
+        st.floats(allow_nan=True, allow_infinity=True, width=64)
+        | st.integers(-(10**12), 10**12).map(
+            lambda k: (k + 0.5) / 1e6  # exact halves of the 6th decimal, where rounding must tie-break
+        ),
+        min_size=1,
+        max_size=80,
+    ),
+    st.integers(0, 9),
+)
+def test_an_array_rounds_as_round_does_value_for_value(values: list[float], digits: int) -> None:
+    got = finite_or_none(np.array(values, dtype=np.float64), digits)
+    assert _same(got, _python_rounded(values, digits)), (values, digits)
+
+
+def test_array_rounding_at_hand_picked_values() -> None:
+    values = [15.620000000000001, 0.0000005, 0.0000015, 0.0000025, -0.0000005, -0.0, 1.7e9 + 0.1234565,
+              2.675, 1e300, math.nan, -math.inf]  # fmt: skip
+    got = finite_or_none(np.array(values), 6)
+    assert _same(got, _python_rounded(values, 6))
+    assert got[0] == 15.62 and got[7] == 2.675 and got[8] == 1e300 and got[9:] == [None, None]
+    assert got[5] == 0.0 and math.copysign(1.0, cast(float, got[5])) == -1.0
