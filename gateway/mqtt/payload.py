@@ -32,7 +32,6 @@ Binary layout (little-endian, ``BINARY_VERSION`` 1)::
 
 from __future__ import annotations
 
-import json
 import math
 import struct
 from typing import Any, Final, TypedDict
@@ -41,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import GatewayError
-from ..runtime.frame import DECIMALS, Frame, frame_of
+from ..runtime.frame import DECIMALS, Frame, compact_json, frame_of
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
 __all__ = [
@@ -116,7 +115,7 @@ def frame_dict(source: DeviceSnapshot | Frame, sequence: int) -> FrameFields:
 
 
 def encode_json(frame: FrameFields) -> bytes:
-    return json.dumps(frame, separators=(",", ":"), allow_nan=False).encode("utf-8")
+    return compact_json(frame)
 
 
 def json_body(snap: DeviceSnapshot) -> bytes:
@@ -126,7 +125,7 @@ def json_body(snap: DeviceSnapshot) -> bytes:
     by ``encode_json_frame``."""
     fields: dict[str, Any] = dict(frame_dict(frame_of(snap), 0))
     del fields["sequence"]
-    return json.dumps(fields, separators=(",", ":"), allow_nan=False).encode("utf-8")
+    return compact_json(fields)
 
 
 def encode_json_frame(snap: DeviceSnapshot, sequence: int) -> bytes:

@@ -17,11 +17,13 @@ to decimals, not to significant digits, keeps the Unix time to the microsecond.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
+
+import orjson
 
 from .snapshot import ChannelStatus, DeviceSnapshot, finite_or_none
 
-__all__ = ["DECIMALS", "Frame", "frame_of"]
+__all__ = ["DECIMALS", "Frame", "compact_json", "frame_of"]
 
 #: Decimals of every published float.
 DECIMALS: Final = 6
@@ -88,3 +90,12 @@ class Frame:
 def frame_of(snap: DeviceSnapshot) -> Frame:
     """The one ``Frame`` of ``snap``: built by the first thread that asks, then shared."""
     return snap.derived(Frame.of)
+
+
+def compact_json(value: Any) -> bytes:
+    """The compact UTF-8 JSON of a frame's encoding (no spaces; the same text as
+    ``json.dumps(value, separators=(",", ":"))`` but for exponents, ``5e-5`` for ``5e-05``, and
+    non-ASCII characters, written as themselves): orjson, a tenth of the standard library's
+    cost, which matters at a thousand frames a second. Frames hold no NaN (``Frame`` has
+    None), so none is written."""
+    return orjson.dumps(value)

@@ -12,13 +12,12 @@ encoded once per poll and shared by every client.
 from __future__ import annotations
 
 import itertools
-import json
 import math
 from collections.abc import Iterable, Sequence
 from typing import Any, Protocol, TypedDict
 
 from ..runtime.counters import DeviceCounters
-from ..runtime.frame import DECIMALS, Frame, frame_of
+from ..runtime.frame import DECIMALS, Frame, compact_json, frame_of
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
 #: Units of every quantity in the API, as listed with each device.
@@ -180,7 +179,7 @@ def frame_json(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounter
 
 def encode_frame(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounters | None) -> bytes:
     """The compact UTF-8 JSON of one frame: an object starting with ``{"device":``."""
-    return json.dumps(frame_json(source, seq, counters), separators=(",", ":"), allow_nan=False).encode()
+    return compact_json(frame_json(source, seq, counters))
 
 
 def with_dropped(frame: bytes, dropped: int) -> bytes:
