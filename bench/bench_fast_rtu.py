@@ -9,21 +9,25 @@ at a time):
    then write the 8-byte request (device 1, 0x42, start 0, 60 points, CRC16/Modbus), read the
    5 + 120 byte answer, check address, function, byte count and CRC, unpack the 60 values;
    frames per second. The device in mN mode for the skin60-mn line, in counts for the other.
-2. **gateway, skin60-mn**: the real gateway (``Poller`` with the real ``ModbusTransport`` on a
-   ``kind = "rtu"`` bus at 4,000,000 baud, ``poll_interval_s = 0``: polls back to back),
-   the shipped profile ``skin60-mn`` (force in mN passed through) with drift correction on
+2. **gateway, skin60-mn**: the real gateway (``Poller`` with the transport of a ``kind = "rtu"``
+   bus at 4,000,000 baud with ``serial_client = "direct"``: the gateway's own RTU framing,
+   ``gateway.modbus.rtu_line``; ``poll_interval_s = 0``: polls back to back), the shipped
+   profile ``skin60-mn`` (force in mN passed through) with drift correction on
    (``drift = { creep_fraction = 0.05, creep_tau_s = 20.0 }`` in the device's frame table),
    every frame published to the web stream (a ``FrameHub`` attached to a loop in its own
    thread, as the HTTP server's, with one open stream queue whose frames are taken as they
    come) and to MQTT (a local ``mosquitto`` on an ephemeral loopback port, JSON, QoS 1, the
    default queue), if ``mosquitto`` is installed; frames per second counted from the
-   published snapshots (new, ``up`` device snapshots).
+   published snapshots (new, ``up`` device snapshots). Both publishers subscribe as
+   ``run`` does: what they derive from a snapshot is computed by the poll loop while it
+   waits, and their threads yield the CPU to it.
 3. **gateway, skin60-counts**: the same with the raw-counts profile (our physical model of
    each sensor with creep, through the profile's assumed divider), against a bare loop with
    the device in counts mode.
-4. (diagnostic) the gateway's ``ModbusTransport`` alone reading 0x42 back to back (pymodbus'
-   client and RTU framing, our checks; no conversion, no publishing), to tell the cost of
-   the Modbus layer from that of conversion and publishing.
+4. (diagnostic) the gateway's transport alone reading 0x42 back to back (no conversion, no
+   publishing), with either client (``serial_client`` "direct" and "pymodbus"), to tell the
+   cost of the Modbus layer from that of conversion and publishing; and line 2 with
+   pymodbus' client.
 
 Goals: the gateway at >= 1,000 frames/s of 60 points and >= 0.9 of the bare loop.
 
@@ -31,10 +35,12 @@ What limits the rate: a pty has no baud rate. The simulator models the wire by h
 answer until ``(8 + 125 + 2 x 3.5) x 11 bits / 4,000,000 baud`` = 385 us after the request
 arrived (about 2,600 transactions/s); beyond that every byte goes through the kernel's pty
 and socat's relay, and every side spends CPU per frame: the device process (pymodbus server,
-the simulated array), socat, and the reader. On a 2-core machine the three share the cores,
-so the rates below are CPU-bound, not wire-bound. The device process is pinned to the last
-core, the reader (bare loop or gateway) to the others, as in ``bench_gateway``; socat runs
-where the scheduler puts it.
+the simulated array), socat, and the reader. On a 2-core machine they share the cores, so
+the rates below are CPU-bound, not wire-bound. The device process and socat (the wire) are
+pinned to the last core, the reader (bare loop or gateway, and the broker it starts) to the
+others: on real hardware neither the device nor the wire uses the host's CPU, and socat on
+the reader's core would wait for the reader's time slice before relaying an answer, which
+no UART or USB interrupt does. ``BENCH_WIRE_UNPINNED=1`` leaves socat to the scheduler.
 
 Each line runs for ``BENCH_SECONDS`` (default 5) seconds in all.
 """
@@ -79,6 +85,10 @@ DEVICE_ID = 1
 FC = 0x42
 OUTPUT_MODE_REGISTER = 2
 MODES = {"skin60-mn": 1, "skin60-counts": 0}  # the output mode each profile sets at connect
+CLIENTS = ("direct", "pymodbus")  # who frames RTU on the gateway's side (serial_client)
+#: BENCH_WIRE_UNPINNED=1: socat runs where the scheduler puts it (it then competes with the
+#: reader for the reader's core: a pty relay is an ordinary process, a UART is not)
+WIRE_UNPINNED = os.environ.get("BENCH_WIRE_UNPINNED", "") == "1"
 ANSWER_BYTES = 5 + 2 * POINTS
 BITS_PER_CHAR = 11
 GAP_CHARS = 3.5
@@ -378,10 +388,12 @@ def _pinned(device_pid: int, wire_pid: int) -> Iterator[str]:
         yield "one core: device, socat and reader share it"
         return
     os.sched_setaffinity(device_pid, {cores[-1]})
-    os.sched_setaffinity(wire_pid, {cores[-1]})
+    if not WIRE_UNPINNED:
+        os.sched_setaffinity(wire_pid, {cores[-1]})
     os.sched_setaffinity(0, set(cores[:-1]))
+    wire = "socat unpinned" if WIRE_UNPINNED else f"socat pinned to core {cores[-1]} with the device"
     try:
-        yield f"device and socat pinned to core {cores[-1]}, reader (and broker) to {cores[:-1]}"
+        yield f"device pinned to core {cores[-1]}, {wire}, reader (and broker) to {cores[:-1]}"
     finally:
         os.sched_setaffinity(0, set(cores))
 
@@ -408,17 +420,23 @@ async def _bench() -> None:
             broker, mqtt_port = _start_mosquitto(folder)
             stack.callback(_stop, broker)
         bare_fps: dict[str, list[float]] = {p: [] for p in MODES}
-        transport_fps: list[float] = []
+        transport_fps: dict[str, list[float]] = {c: [] for c in CLIENTS}
         runs = {p: GatewayRun() for p in MODES}
+        pymodbus_run = GatewayRun()
         configs = {p: gateway_config(a, p, mqtt_port) for p in MODES}
+        pymodbus_config = gateway_config(a, "skin60-mn", mqtt_port, client="pymodbus")
         for _ in range(ROUNDS):
             for profile, run in runs.items():
                 fps, _n = await asyncio.to_thread(bare_loop, a, slot, MODES[profile])
                 bare_fps[profile].append(fps)
                 await gateway_round(configs[profile], slot, run)
                 if profile == "skin60-mn":  # the device is in mN mode now
-                    await asyncio.sleep(0.05)  # the cancelled poll's answer, discarded at connect
-                    transport_fps.append((await transport_only(configs[profile], slot))[0])
+                    for client in CLIENTS:
+                        await asyncio.sleep(0.05)  # the cancelled poll's answer, discarded at connect
+                        config = configs[profile] if client == "direct" else pymodbus_config
+                        transport_fps[client].append((await transport_only(config, slot))[0])
+                    await asyncio.sleep(0.05)
+                    await gateway_round(pymodbus_config, slot, pymodbus_run)
     mqtt_note = "MQTT (local mosquitto, JSON, QoS 1)" if mqtt_port else "NO MQTT (mosquitto not installed)"
     print(f"RTU {BAUD:,} baud on a socat pty pair, skin60 (60 points, function 0x42), {ROUNDS} rounds")
     print(f"  {cores}; {os.cpu_count()} cores")
@@ -431,10 +449,17 @@ async def _bench() -> None:
         unit = "mN" if MODES[profile] else "counts"
         print(f"  bare pyserial loop, device in {unit} (request, read, CRC, unpack): {bare:8.1f} frames/s")
         if profile == "skin60-mn":
-            transport = sum(transport_fps) / ROUNDS
+            for client in CLIENTS:
+                transport = sum(transport_fps[client]) / ROUNDS
+                print(
+                    f"  (diagnostic) gateway transport alone, serial_client = {client!r}, 0x42 back to "
+                    f"back, no conversion or publishing: {transport:8.1f} frames/s, "
+                    f"{transport / bare:.3f} of bare"
+                )
+            fps = pymodbus_run.frames / pymodbus_run.seconds
             print(
-                f"  (diagnostic) gateway transport alone, 0x42 back to back, no conversion or publishing: "
-                f"{transport:8.1f} frames/s, {transport / bare:.3f} of bare"
+                f"  (diagnostic) gateway {profile} as below but serial_client = 'pymodbus': "
+                f"{fps:8.1f} frames/s, {fps / bare:.3f} of bare"
             )
         fps = run.frames / run.seconds
         ratio = fps / bare
