@@ -68,6 +68,7 @@ from gateway.config import GatewayConfig
 from gateway.config.mqtt import MqttConfig
 from gateway.config.parser import parse_config
 from gateway.modbus.backends import open_transport
+from gateway.modbus.rtu_line import crc16_modbus
 from gateway.modbus.vendor_fc import VendorRead
 from gateway.mqtt.publisher import MqttPublisher
 from gateway.runtime.poller import Poller
@@ -99,27 +100,6 @@ DRIFT = "{ creep_fraction = 0.05, creep_tau_s = 20.0 }"
 
 
 # ---------------------------------------------------------------------------- the bare loop
-def _crc_table() -> tuple[int, ...]:
-    table = []
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
-        table.append(crc)
-    return tuple(table)
-
-
-_CRC_TABLE = _crc_table()
-
-
-def crc16_modbus(data: bytes) -> int:
-    """CRC-16/MODBUS (init 0xFFFF, reflected polynomial 0xA001); sent low byte first."""
-    crc = 0xFFFF
-    for b in data:
-        crc = (crc >> 8) ^ _CRC_TABLE[(crc ^ b) & 0xFF]
-    return crc
-
-
 def request_frame(device_id: int = DEVICE_ID, start: int = 0, count: int = POINTS) -> bytes:
     """The RTU request of function 0x42: address, code, start, count (u16 BE), CRC (LE)."""
     body = struct.pack(">BBHH", device_id, FC, start, count)

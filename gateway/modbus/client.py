@@ -53,28 +53,19 @@ from ..errors import (
     GatewayError,
 )
 from .endpoint import Endpoint, TlsSettings
-from .transport import EXCEPTION_NAMES, Transport
+from .transport import (
+    DEVICE_ID_OBJECTS,
+    EXCEPTION_NAMES,
+    FC_DEVICE_ID,
+    FC_READ_HOLDING,
+    FC_READ_INPUT,
+    FC_WRITE_MULTIPLE,
+    FC_WRITE_SINGLE,
+    Transport,
+)
 from .vendor_fc import VendorRead
 
 log = logging.getLogger(__name__)
-
-#: Modbus function codes used here.
-FC_READ_HOLDING = 0x03
-FC_READ_INPUT = 0x04
-FC_WRITE_SINGLE = 0x06
-FC_WRITE_MULTIPLE = 0x10
-FC_DEVICE_ID = 0x2B
-
-#: Read Device Identification object ids (MEI type 14).
-DEVICE_ID_OBJECTS: dict[int, str] = {
-    0x00: "VendorName",
-    0x01: "ProductCode",
-    0x02: "MajorMinorRevision",
-    0x03: "VendorUrl",
-    0x04: "ProductName",
-    0x05: "ModelName",
-    0x06: "UserApplicationName",
-}
 
 
 class VendorPDU(ModbusPDU):

@@ -47,33 +47,26 @@ import serial
 
 from ..errors import DecodeError, DeviceConnectionError, DeviceExceptionResponse, DeviceTimeoutError
 from .endpoint import Endpoint
-from .transport import EXCEPTION_NAMES, Transport
+from .transport import (
+    DEVICE_ID_OBJECTS,
+    EXCEPTION_NAMES,
+    FC_DEVICE_ID,
+    FC_READ_HOLDING,
+    FC_READ_INPUT,
+    FC_WRITE_MULTIPLE,
+    FC_WRITE_SINGLE,
+    Transport,
+)
 from .vendor_fc import VendorRead
 
 __all__ = ["RtuLineTransport", "adu", "answer_size", "crc16_modbus"]
 
 log = logging.getLogger(__name__)
 
-FC_READ_HOLDING = 0x03
-FC_READ_INPUT = 0x04
-FC_WRITE_SINGLE = 0x06
-FC_WRITE_MULTIPLE = 0x10
-FC_MEI = 0x2B
-MEI_DEVICE_ID = 0x0E
+MEI_DEVICE_ID = 0x0E  # the MEI type of read device identification (function 43)
 
 #: Readiness without data this many times in a row: the port is gone (pyserial's view too).
 EMPTY_READS_LOST = 3
-
-#: Read Device Identification object ids (MEI type 14) by name, as ``client`` names them.
-DEVICE_ID_OBJECTS: dict[int, str] = {
-    0x00: "VendorName",
-    0x01: "ProductCode",
-    0x02: "MajorMinorRevision",
-    0x03: "VendorUrl",
-    0x04: "ProductName",
-    0x05: "ModelName",
-    0x06: "UserApplicationName",
-}
 
 
 def _crc_table() -> tuple[int, ...]:
@@ -371,7 +364,7 @@ class RtuLineTransport(Transport):
         info: dict[str, str] = {}
         object_id = 0
         for _ in range(8):  # "more follows" continuation, bounded
-            request = bytes((FC_MEI, MEI_DEVICE_ID, 0x02, object_id))
+            request = bytes((FC_DEVICE_ID, MEI_DEVICE_ID, 0x02, object_id))
             pdu = await self._transact(device_id, request, _device_id_rule, what)
             if pdu[1] != MEI_DEVICE_ID:
                 raise DecodeError(f"{what}: answer has MEI type {pdu[1]}")

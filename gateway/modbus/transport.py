@@ -54,6 +54,24 @@ from .vendor_fc import VendorRead
 log = logging.getLogger(__name__)
 
 
+#: Modbus function codes the backends send.
+FC_READ_HOLDING = 0x03
+FC_READ_INPUT = 0x04
+FC_WRITE_SINGLE = 0x06
+FC_WRITE_MULTIPLE = 0x10
+FC_DEVICE_ID = 0x2B  # encapsulated interface (MEI); type 14: read device identification
+
+#: Read Device Identification object ids (MEI type 14) by the names the backends report.
+DEVICE_ID_OBJECTS: dict[int, str] = {
+    0x00: "VendorName",
+    0x01: "ProductCode",
+    0x02: "MajorMinorRevision",
+    0x03: "VendorUrl",
+    0x04: "ProductName",
+    0x05: "ModelName",
+    0x06: "UserApplicationName",
+}
+
 EXCEPTION_NAMES: dict[int, str] = {
     1: "illegal function",
     2: "illegal data address",

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from test_mqtt_payload import snapshot as payload_snapshot
 
 from gateway.mqtt import payload
 from gateway.mqtt.payload import encode_json, encode_json_frame, frame_dict, json_body
@@ -20,33 +21,16 @@ from gateway.runtime.snapshot import ChannelStatus, DeviceSnapshot
 
 
 def snapshot(**changes: object) -> DeviceSnapshot:
-    """Four channels: ok at 1.25 N, open (inf ohm, no force), short, stale with NaN values."""
+    """Four channels: ok at 1.25 N, open (inf ohm, no force), short, stale with NaN values
+    (``test_mqtt_payload``'s snapshot with its last channel stale)."""
     fields: dict[str, object] = {
-        "device": "arr",
-        "bus": "sim",
-        "channel_index": np.arange(4),
-        "channel_names": ("a0", "a1", "b0", "b1"),
-        "x_mm": np.array([0.0, 2.5, 0.0, 2.5]),
-        "y_mm": np.array([0.0, 0.0, 2.5, 2.5]),
-        "resistance_ohm": np.array([1500.0, math.inf, 0.0, math.nan]),
         "force_n": np.array([1.25, math.nan, math.nan, math.nan]),
-        "static_estimate": None,
-        "reference_force_n": np.full(4, math.nan),
         "status": np.array(
             [ChannelStatus.OK, ChannelStatus.OPEN, ChannelStatus.SHORT, ChannelStatus.STALE], dtype=np.int8
         ),
-        "up": True,
-        "timestamp_s": 1_700_000_000.125,
-        "last_success_timestamp_s": 1_700_000_000.125,
-        "device_time_s": 12.5,
-        "poll_interval_s": 0.05,
-        "total_force_n": 1.25,
-        "center_of_pressure_mm": (0.0, 0.0),
-        "channels_in_contact": 1,
-        "contact_area_mm2": 6.25,
     }
     fields.update(changes)
-    return DeviceSnapshot(**fields)  # type: ignore[arg-type]
+    return payload_snapshot(**fields)
 
 
 STALE = np.full(4, int(ChannelStatus.STALE), dtype=np.int8)
