@@ -17,6 +17,12 @@ from pathlib import Path
 
 import pytest
 import pytest_asyncio
+from hypothesis import HealthCheck, settings
+
+# Property tests check values, never time: no deadline per example (hypothesis' default of
+# 200 ms fails an example that a busy 2-core machine merely ran slowly). Speed lives in bench/.
+settings.register_profile("tactile", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("tactile")
 
 # One BLAS thread, as the command line has (gateway/cli/_threads.py): the fits' matrices are
 # small, and a thread pool per process spins on a busy 2-core machine (a calibration measured

@@ -59,7 +59,6 @@ from aiohttp.http_exceptions import (
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 from prometheus_client.core import CounterMetricFamily, Metric
 
-from ..runtime.priority import yield_to_poll_loop
 from .web_config import BasicAuth, WebConfig
 
 log = logging.getLogger(__name__)
@@ -518,7 +517,6 @@ class MetricsServer:
             await asyncio.wait(waiting)
 
     def _run(self, ready: threading.Event, failure: list[BaseException]) -> None:
-        yield_to_poll_loop()
         loop = self._loop
         assert loop is not None
         loop.set_default_executor(ThreadPoolExecutor(WORKERS, thread_name_prefix="tactile-metrics-worker"))

@@ -35,7 +35,6 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 from ..config import GatewayConfig
 from ..config.mqtt import MqttConfig
 from ..runtime.frame import frame_of
-from ..runtime.priority import yield_to_poll_loop
 from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from .payload import encode_binary, encode_json_frame, frame_dict, json_body
 
@@ -244,7 +243,6 @@ class MqttPublisher:
                 self._cond.wait(seconds)
 
     def _run(self) -> None:
-        yield_to_poll_loop()
         backoff = BACKOFF_INITIAL_S
         socket_open = False
         while True:

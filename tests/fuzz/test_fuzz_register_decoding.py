@@ -225,7 +225,7 @@ def test_fuzz_decode_sample_and_the_processor() -> None:
     tally = Tally("decode_sample + DeviceProcessor on random register images (several per example)")
     examples: list[DeviceConfig] = []
 
-    @settings(FUZZ, max_examples=300, deadline=5000)
+    @settings(FUZZ, max_examples=300)
     @given(st.data(), devices, st.lists(st.floats(0.0, 1e5), min_size=1, max_size=4))
     def run(data: st.DataObject, dev: DeviceConfig, steps: list[float]) -> None:
         with warnings.catch_warnings():
