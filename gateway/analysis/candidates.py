@@ -23,6 +23,12 @@ Fitting one candidate (the reference force drives the state, as in the physical 
    the play's directions stay): the alternation alone moves slowly along the curve's gain,
    which a creep fraction shares on every hold, and leaves most of the fraction in the curve.
 
+The power law and the line are fitted in conductance relative to the median conductance of
+the rows they are fitted on (``conductance_scale``), so a record whose resistances are all
+divided by one constant (a ``ratio`` front end's readings, in units of an unknown reference
+resistor) gives the same fit, parameters rescaled, and reads the same forces: the solver's
+steps, bounds and stopping rules see the same numbers either way.
+
 ``rank_candidates`` returns every candidate's held-out force RMS, its drift across held-out
 holds (end minus start error, % of full scale) and its parameter count, best first.
 """
@@ -136,6 +142,7 @@ def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> Sta
     if f.size < 4 or np.ptp(f) <= 0.0:
         raise ValueError("a curve needs at least four rows at two or more distinct forces")
     g = 1.0 / r
+    g0 = conductance_scale(g)
     if kind == "line":
         # force-space least squares: F = (G - c) / m = alpha G + beta
         alpha, beta = _line_fit(g, f, "the conductance does not change with force on these rows")
@@ -143,17 +150,18 @@ def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> Sta
             raise ValueError("the conductance does not rise with force on these rows")
         return LineCurve(float(1.0 / alpha), float(-beta / alpha))
     if kind == "power_law":
-        n0, lnk0 = _line_fit(np.log(f), np.log(g), "the forces are too close for a power law")
+        # ln(G / g0) = ln(k / g0) + n ln F: p[0] = ln(k / g0), bounded relative to the data
+        lg = np.log(g / g0)
+        n0, lnk0 = _line_fit(np.log(f), lg, "the forces are too close for a power law")
         if not n0 > 0.0:
             raise ValueError("the conductance does not rise with force on these rows")
-        lg = np.log(g)
 
         def resid(p: FloatArray) -> FloatArray:
             return np.asarray(np.exp((lg - p[0]) / p[1]) - f)
 
         sol = least_squares(resid, np.array([lnk0, n0]), bounds=([-60.0, 0.05], [20.0, 10.0]), x_scale="jac")
         lnk, n = (float(v) for v in (sol.x if sol.success else (lnk0, n0)))
-        return PowerLawCurve(math.exp(lnk), n)
+        return PowerLawCurve(g0 * math.exp(lnk), n)
     if kind == "lookup":
         lk = MonotoneLookup.fit(f, r, LOOKUP_KNOTS)
         lr = np.asarray(lk.log_r)
@@ -163,6 +171,13 @@ def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> Sta
             raise ValueError("the lookup found no force range on these rows")
         return LookupCurve(tuple(float(math.exp(v)) for v in lr), tuple(float(v) for v in kf))
     raise ValueError(f"unknown curve kind {kind!r}; allowed: {', '.join(CURVE_KINDS)}")
+
+
+def conductance_scale(conductance_s: FloatArray) -> float:
+    """The median of the finite, positive conductances (S, or 1/R_ref for relative
+    readings): the unit the power law and the line are fitted in (1 when there are none)."""
+    g = conductance_s[np.isfinite(conductance_s) & (conductance_s > 0)]
+    return float(np.median(g)) if g.size else 1.0
 
 
 class _Regressors:
@@ -341,11 +356,15 @@ def _refine(
     if np.count_nonzero(ok) <= 2 + 2 * elements + hyst:
         return curve, drift
     f, g = reg.force[ok], 1.0 / r[ok]
+    # solved in g = G / g0 (``conductance_scale``): the same problem whatever unit R is in
+    g0 = conductance_scale(g)
+    g = g / g0
     power = isinstance(curve, PowerLawCurve)
-    if isinstance(curve, PowerLawCurve):  # x = exp((ln G - ln k) / n)
-        p0, low, high = [math.log(curve.coefficient_s), curve.exponent], [-60.0, 0.05], [20.0, 10.0]
-    else:  # x = (G - c) / m = alpha G + b
-        p0 = [1.0 / curve.slope_s_per_n, -curve.intercept_s / curve.slope_s_per_n]
+    if isinstance(curve, PowerLawCurve):  # x = exp((ln g - ln(k / g0)) / n)
+        p0 = [math.log(curve.coefficient_s / g0), curve.exponent]
+        low, high = [-60.0, 0.05], [20.0, 10.0]
+    else:  # x = (G - c) / m = alpha G + b = (alpha g0) g + b
+        p0 = [g0 / curve.slope_s_per_n, -curve.intercept_s / curve.slope_s_per_n]
         low, high = [0.0, -np.inf], [np.inf, np.inf]
     taus = [d.creep_tau_s, d.creep2_tau_s][:elements]
     fractions = [d.creep_fraction, d.creep2_fraction][:elements]
@@ -389,8 +408,8 @@ def _refine(
     beta = beta if not hyst or beta != 0.0 else 1e-9
     out = Drift(a1, tau1, a2, tau2, beta, d.hysteresis_width_n)
     if power:
-        return PowerLawCurve(math.exp(p[0]), p[1]), out
-    return LineCurve(1.0 / p[0], -p[1] / p[0]), out
+        return PowerLawCurve(g0 * math.exp(p[0]), p[1]), out
+    return LineCurve(g0 / p[0], -p[1] / p[0] * g0), out
 
 
 def hold_drift_pct(

@@ -31,7 +31,7 @@ from ..config.mqtt import MqttConfig
 from ..errors import ConfigError
 from ..metrics.web_config import load_web_config
 from ..modbus.plan import MERGE_GAP, device_plan
-from ..model import parameter_names
+from ..model import RatioFrontEnd, parameter_names
 from ..runtime.summary import device_summary
 from .common import config_option
 
@@ -140,9 +140,10 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
         )
     elif tared:
         values = [ch.baseline_ohm for ch in tared if ch.baseline_ohm is not None]
+        unit = "R_ref" if dev.encoding == "adc" and isinstance(dev.front_end, RatioFrontEnd) else "ohm"
         out.append(
             f"    zero: {len(tared)} channel(s) with an unloaded baseline, "
-            f"{min(values):.4g}..{max(values):.4g} ohm (read at the baseline: 0 N, no contact)"
+            f"{min(values):.4g}..{max(values):.4g} {unit} (read at the baseline: 0 N, no contact)"
         )
     else:
         hint = "see `tare`" + (", or `tare --device-zero` for the device's own" if device_zero else "")

@@ -8,7 +8,15 @@ from typing import Any, Final
 
 import numpy as np
 
-from ..model import FRONT_END_KINDS, Divider, DividerStatus, FrontEnd, LowSideDivider, Transimpedance
+from ..model import (
+    FRONT_END_KINDS,
+    Divider,
+    DividerStatus,
+    FrontEnd,
+    LowSideDivider,
+    RatioFrontEnd,
+    Transimpedance,
+)
 from ..model.params import Interval
 from .layout import LAYOUT_ORDERS, LAYOUT_ORIGINS, GridLayout
 from .schema import PITCH_MM
@@ -30,6 +38,7 @@ _FRONT_END_KEYS: Final = {
     "high_side": ("kind", "supply_v", "reference_ohm", *_ADC_KEYS),
     "low_side": ("kind", "supply_v", "reference_ohm", *_ADC_KEYS),
     "transimpedance": ("kind", "bias_v", "feedback_ohm", "output_offset_v", *_ADC_KEYS),
+    "ratio": ("kind", "adc_bits", "rises_with_load", "adc_offset_counts"),
 }
 _POSITIVE: Final = Interval(0.0, math.inf, low_inclusive=False, high_inclusive=False)
 _POSITIVE_OR_UNSET: Final = Interval(0.0, math.inf, low_inclusive=True, high_inclusive=False)
@@ -55,7 +64,8 @@ def parse_layout(device: Table, table: Table, n: int) -> GridLayout:
 
 
 def parse_baselines(table: Table, n: int, front_end: FrontEnd | None) -> tuple[float | None, ...] | None:
-    """Per-channel unloaded resistance (ohm) from ``baseline_counts`` or ``baseline_ohm``."""
+    """Per-channel unloaded resistance (ohm) from ``baseline_counts`` or ``baseline_ohm`` (in
+    units of the reference resistor for a ``ratio`` front end, as its readings are)."""
     if table.has("baseline_counts") and table.has("baseline_ohm"):
         raise table.error("baseline_ohm", "give baseline_counts or baseline_ohm, not both")
     key = "baseline_counts" if table.has("baseline_counts") else "baseline_ohm"
@@ -126,6 +136,8 @@ def parse_front_end(ctx: Context, path: str, data: dict[str, Any]) -> FrontEnd:
         "adc_bits": table.integer("adc_bits", REQUIRED, 8, 16, " (ADC counts are one 16-bit register)"),
         "adc_offset_counts": table.number("adc_offset_counts", 0.0, _FINITE, " counts"),
     }
+    if kind == "ratio":
+        return _front_end(table, RatioFrontEnd, rises_with_load=table.boolean("rises_with_load", True), **adc)
     if kind == "transimpedance":
         return _front_end(
             table,

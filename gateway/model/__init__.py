@@ -12,9 +12,11 @@ plus the further effects named in ``docs/record-format.md``.
 * ``inversion``: force from resistance (statuses, Newton solvers);
 * ``model``: ``SensorModel``, which puts them together;
 * ``frontend``: the read-out front ends (``Divider``, the high-side divider of eq. 18;
-  ``LowSideDivider``; ``Transimpedance``) with their ADC, both ways, and the factory by kind;
+  ``LowSideDivider``; ``Transimpedance``; ``RatioFrontEnd``, a divider of unknown values read
+  in units of its reference resistor) with their ADC, both ways, and the factory by kind;
   ``frontend_base``: what they share (``FrontEnd``, ``DividerStatus``, the ADC);
   ``frontend_dividers``: the two dividers; ``frontend_transimpedance``: the amplifier;
+  ``frontend_ratio``: the ratio read-out;
 * ``divider``: the paper's conductance line (and ``Divider`` re-exported).
 """
 
@@ -35,6 +37,7 @@ from .frontend import (
     DividerStatus,
     FrontEnd,
     LowSideDivider,
+    RatioFrontEnd,
     Transimpedance,
     front_end_from_kind,
 )
@@ -60,6 +63,7 @@ __all__ = [
     "LowSideDivider",
     "ModelState",
     "ParameterError",
+    "RatioFrontEnd",
     "ResistanceBreakdown",
     "SensorModel",
     "SensorParams",

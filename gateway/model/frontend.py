@@ -10,6 +10,10 @@ with the sensor r from the supply V+ to the output node and R_ref from the outpu
 * ``LowSideDivider`` (``"low_side"``): R_ref is a pull-up from the supply to the output node,
   the sensor goes from the output to ground: ``V_o = V+ r / (R_ref + r)``, ``r = R_ref V_o /
   (V+ - V_o)``.
+* ``RatioFrontEnd`` (``"ratio"``): a ratiometric divider of unknown values, read as the
+  sensor resistance in units of its reference resistor, ``r / R_ref`` (the high-side or the
+  low-side divider with ``V+ = 1`` and ``R_ref = 1``, by whether the counts rise with load):
+  no circuit value is assumed, and forces need a calibration in those units.
 * ``Transimpedance`` (``"transimpedance"``): the sensor, driven by a bias voltage V_b, feeds
   the virtual ground of an op-amp with feedback resistor R_f: ``V_o = V_os + V_b R_f / r``
   (the magnitude of the inverting output, plus the amplifier's output offset V_os), ``r = V_b
@@ -30,7 +34,8 @@ the converter or amplifier adds. Reading a code back:
 ``docs/front-ends.md`` works each topology through with numbers.
 
 The shared part (``FrontEnd``, ``DividerStatus``, the ADC) is in ``frontend_base``, the two
-dividers in ``frontend_dividers``, the transimpedance stage in ``frontend_transimpedance``;
+dividers in ``frontend_dividers``, the ratio read-out in ``frontend_ratio``, the
+transimpedance stage in ``frontend_transimpedance``;
 this module re-exports them and builds a front end from its configuration ``kind``.
 """
 
@@ -41,6 +46,7 @@ from typing import Any
 
 from .frontend_base import DividerStatus, FloatArray, FrontEnd, StatusArray
 from .frontend_dividers import Divider, LowSideDivider
+from .frontend_ratio import RatioFrontEnd
 from .frontend_transimpedance import Transimpedance
 
 __all__ = [
@@ -50,12 +56,15 @@ __all__ = [
     "FloatArray",
     "FrontEnd",
     "LowSideDivider",
+    "RatioFrontEnd",
     "StatusArray",
     "Transimpedance",
     "front_end_from_kind",
 ]
 
-_FRONT_ENDS: dict[str, type[FrontEnd]] = {cls.kind: cls for cls in (Divider, LowSideDivider, Transimpedance)}
+_FRONT_ENDS: dict[str, type[FrontEnd]] = {
+    cls.kind: cls for cls in (Divider, LowSideDivider, Transimpedance, RatioFrontEnd)
+}
 
 #: The ``kind`` names of the front ends, as written in configuration files.
 FRONT_END_KINDS: tuple[str, ...] = tuple(_FRONT_ENDS)

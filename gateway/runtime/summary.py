@@ -1,6 +1,9 @@
 """What the gateway does with a device, in words: where its values come from, what turns them
 into force, which effects are tracked and by which clock, where each channel's parameters
 come from, and which forces rest on assumed circuit values rather than on a calibration.
+A ``ratio`` front end (``gateway.model.RatioFrontEnd``) assumes no circuit value: its
+readings are in units of the board's unknown reference resistor, so its forces rest on a
+calibration or on nothing meaningful (the default parameters are in ohm).
 
 ``check-config`` and ``poll-once`` print these lines, so a user can see whether drift
 correction is on without reading the code.
@@ -11,6 +14,7 @@ from __future__ import annotations
 from collections import Counter
 
 from ..config import DeviceConfig
+from ..model import RatioFrontEnd
 from ..model.conversion import LineConversion
 from ..model.curves import CurveChannel
 
@@ -99,17 +103,46 @@ def _assumptions(device: DeviceConfig) -> str:
     if device.encoding == "output":
         return "assumes: nothing of the circuit (the device reports force itself)"
     calibrated = sum(1 for ch in chans if "calibration" in ch.params_source)
+    rest = len(chans) - calibrated
+    if device.encoding == "adc" and isinstance(device.front_end, RatioFrontEnd):
+        return _ratio_assumptions(device.front_end, calibrated, rest)
     circuit = (
         "the front end's values (reference resistor, full scale)"
         if device.encoding == "adc"
         else "nothing of the circuit (the device reports ohm)"
     )
-    if calibrated == len(chans):
+    if not rest:
         return f"assumes: {circuit}; forces rest on the calibration of every channel"
     if calibrated:
-        rest = len(chans) - calibrated
         return f"assumes: {circuit}; {calibrated} channels calibrated, {rest} on default parameters"
     return f"assumes: {circuit} and the default sensor parameters: no channel is calibrated (see `calibrate`)"
+
+
+def _ratio_assumptions(front_end: RatioFrontEnd, calibrated: int, rest: int) -> str:
+    """A ratio front end assumes only the divider's topology; its readings are in units of the
+    unknown reference resistor, where the default sensor parameters (ohm) mean nothing."""
+    side = (
+        "rise with load: sensor on the high side"
+        if front_end.rises_with_load
+        else ("fall with load: sensor below a pull-up")
+    )
+    flag = "true" if front_end.rises_with_load else "false"
+    circuit = (
+        f"nothing of the circuit but its topology (rises_with_load = {flag}: counts {side}); "
+        "readings are relative, in units of the unknown reference resistor"
+    )
+    meaningless = "the default sensor parameters are in ohm and do not apply"
+    if not rest:
+        return f"assumes: {circuit}; forces rest on the calibration of every channel"
+    if calibrated:
+        return (
+            f"assumes: {circuit}; {calibrated} channels calibrated, {rest} not: their forces are not "
+            f"meaningful until `calibrate` ({meaningless})"
+        )
+    return (
+        f"assumes: {circuit}; no channel is calibrated: forces are not meaningful until `calibrate` "
+        f"({meaningless})"
+    )
 
 
 def device_summary(device: DeviceConfig) -> list[str]:

@@ -12,6 +12,7 @@ from click.testing import CliRunner, Result
 
 from gateway.cli import main
 from gateway.config import load_config
+from gateway.model import RatioFrontEnd
 
 CONFIG = """\
 # Bench gateway: keep this comment.
@@ -144,6 +145,69 @@ def test_check_config_on_the_shipped_example() -> None:
     result = run("check-config", "-c", str(example))
     assert result.exit_code == 0, result.output
     assert "15 enabled" in result.stdout
+
+
+RATIO_CONFIG = """\
+[[bus]]
+name = "bench"
+kind = "tcp"
+host = "127.0.0.1"
+port = 5020
+
+[[bus.device]]
+name = "pad"
+device_id = 1
+profile = "tactile-sim"
+channels = 4
+
+[bus.device.front_end]
+kind = "ratio"
+adc_bits = 12
+"""
+
+RATIO_CIRCUIT = (
+    "assumes: nothing of the circuit but its topology (rises_with_load = true: counts rise with load: "
+    "sensor on the high side); readings are relative, in units of the unknown reference resistor; "
+)
+
+
+def test_check_config_of_a_ratio_front_end_says_what_rests_on_nothing(tmp_path: Path) -> None:
+    path = tmp_path / "ratio.toml"
+    path.write_text(RATIO_CONFIG)
+    assert device(path, "pad").front_end == RatioFrontEnd(adc_bits=12, rises_with_load=True)  # type: ignore[attr-defined]
+    result = run("check-config", "-c", str(path))
+    assert result.exit_code == 0, result.output
+    out = result.stdout
+    assert (
+        "    " + RATIO_CIRCUIT + "no channel is calibrated: forces are not meaningful until `calibrate` "
+        "(the default sensor parameters are in ohm and do not apply)\n"
+    ) in out
+    assert "    front end: ratio: r/R_ref = FS/code - 1 (counts rise with load" in out
+    assert "reads 0.0002443 R_ref .. 4094 R_ref" in out and "no circuit value is assumed" in out
+    assert "the front end's values (reference resistor, full scale)" not in out
+
+
+def test_check_config_of_a_calibrated_ratio_front_end(tmp_path: Path) -> None:
+    (tmp_path / "cal.toml").write_text('[meta]\nrecord = "r1"\n\n[channel."ch00"]\nr0_ohm = 20.0\n')
+    path = tmp_path / "ratio.toml"
+    text = RATIO_CONFIG.replace("channels = 4\n", 'channels = 4\ncalibration = "cal.toml"\n')
+    path.write_text(text.replace("adc_bits = 12\n", "adc_bits = 12\nrises_with_load = false\n"))
+    result = run("check-config", "-c", str(path))
+    assert result.exit_code == 0, result.output
+    assert (
+        "assumes: nothing of the circuit but its topology (rises_with_load = false: counts fall with load: "
+        "sensor below a pull-up); readings are relative, in units of the unknown reference resistor; "
+        "1 channels calibrated, 3 not: their forces are not meaningful until `calibrate`"
+    ) in result.stdout
+    assert "front end: ratio: r/R_ref = code/(FS - code) (counts fall with load" in result.stdout
+    every = "".join(f'[channel."ch{i:02d}"]\nr0_ohm = 20.0\n' for i in range(4))
+    (tmp_path / "cal.toml").write_text('[meta]\nrecord = "r1"\n\n' + every)
+    result = run("check-config", "-c", str(path))
+    assert result.exit_code == 0, result.output
+    assert "sensor below a pull-up); readings are relative, in units of the unknown reference resistor; " in (
+        result.stdout
+    )
+    assert "; forces rest on the calibration of every channel\n" in result.stdout
 
 
 # ----------------------------------------------------------------------------------------------

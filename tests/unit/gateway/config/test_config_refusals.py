@@ -292,6 +292,37 @@ BAD_CONFIGS: list[tuple[str, str, tuple[str, ...]]] = [
         ("bus[0].device[0].divider.bits: unknown key; did you mean 'adc_bits'?",),
     ),
     (
+        "ratio-adc-bits-missing",
+        with_device('[bus.device.front_end]\nkind = "ratio"'),
+        ("bus[0].device[0].front_end.adc_bits: required key is missing; expected an integer in 8..16",),
+    ),
+    (
+        "ratio-adc-bits-range",
+        with_device('[bus.device.front_end]\nkind = "ratio"\nadc_bits = 20'),
+        ("bus[0].device[0].front_end.adc_bits: 20 is out of range; allowed: 8..16",),
+    ),
+    (
+        "ratio-rises-with-load-type",
+        with_device('[bus.device.front_end]\nkind = "ratio"\nadc_bits = 12\nrises_with_load = 1'),
+        ("bus[0].device[0].front_end.rises_with_load: expected a boolean (true or false), got integer 1",),
+    ),
+    (
+        "ratio-offset-range",
+        with_device('[bus.device.front_end]\nkind = "ratio"\nadc_bits = 12\nadc_offset_counts = 2047.5'),
+        (
+            "bus[0].device[0].front_end.adc_offset_counts: adc_offset_counts = 2047.5 must be in "
+            "(-2047.5, 2047.5) counts (|offset| < full scale / 2 at 12 bit)",
+        ),
+    ),
+    (
+        "ratio-no-circuit-values",
+        with_device('[bus.device.front_end]\nkind = "ratio"\nadc_bits = 12\nreference_ohm = 4700.0'),
+        (
+            "bus[0].device[0].front_end.reference_ohm: unknown key "
+            "(allowed keys: kind, adc_bits, rises_with_load, adc_offset_counts)",
+        ),
+    ),
+    (
         "adc-address-fit",
         with_device("[bus.device.registers]\nadc_address = 65530"),
         ("bus[0].device[0].registers.adc_address: 65530 is out of range; allowed: 0..65520",),

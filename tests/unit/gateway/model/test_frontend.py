@@ -23,6 +23,7 @@ from gateway.model import (
     DividerStatus,
     FrontEnd,
     LowSideDivider,
+    RatioFrontEnd,
     Transimpedance,
     front_end_from_kind,
 )
@@ -59,8 +60,8 @@ def test_status_values_and_the_old_import_path() -> None:
     assert OldPathDivider is Divider and OldPathStatus is DividerStatus
     assert [int(s) for s in DividerStatus] == [0, 1, 2, 3, 4]
     assert DividerStatus.SATURATED.name == "SATURATED"
-    assert FRONT_END_KINDS == ("high_side", "low_side", "transimpedance")
-    assert (Divider.kind, LowSideDivider.kind, Transimpedance.kind) == FRONT_END_KINDS
+    assert FRONT_END_KINDS == ("high_side", "low_side", "transimpedance", "ratio")
+    assert (Divider.kind, LowSideDivider.kind, Transimpedance.kind, RatioFrontEnd.kind) == FRONT_END_KINDS
     assert all(isinstance(fe, FrontEnd) for fe in (Divider(), LowSideDivider(3.3, 1e4, 12)))
 
 
@@ -267,6 +268,8 @@ def test_transimpedance_with_a_negative_output_offset_saturates_at_zero() -> Non
 def _forward_code(fe: FrontEnd, r: float) -> float:
     """The exact (unrounded) code, written out from each equation."""
     fs, off = fe.full_scale, fe.adc_offset_counts
+    if isinstance(fe, RatioFrontEnd):  # the divider with V+ = 1 V and R_ref = 1
+        fe = fe.divider
     if isinstance(fe, Divider):
         v = fe.supply_v * fe.reference_ohm / (fe.reference_ohm + r)
     elif isinstance(fe, LowSideDivider):
@@ -279,6 +282,8 @@ def _forward_code(fe: FrontEnd, r: float) -> float:
 
 def _slope_ohm_per_code(fe: FrontEnd, x: float) -> float:
     """|dr/dcode| at the (fractional) code x, from the derivative of each inverse."""
+    if isinstance(fe, RatioFrontEnd):  # the divider with V+ = 1 V and R_ref = 1
+        fe = fe.divider
     fs, vref = fe.full_scale, fe.reference_v
     v = (x - fe.adc_offset_counts) / fs * vref
     if isinstance(fe, Divider):  # r = R (Vs / V - 1): dr/dV = -R Vs / V^2
@@ -299,6 +304,8 @@ def front_ends(draw: st.DrawFn) -> FrontEnd:
     offset = draw(st.one_of(st.just(0.0), st.floats(-0.2 * half, 0.2 * half)))
     vref = draw(st.floats(0.5, 10.0))
     try:
+        if kind == "ratio":
+            return RatioFrontEnd(bits, draw(st.booleans()), offset)
         if kind == "transimpedance":
             return Transimpedance(
                 bias_v=draw(st.floats(0.01, 10.0)),
@@ -356,8 +363,10 @@ def test_every_code_reads_monotonically_with_consistent_status(fe: FrontEnd) -> 
     finite = (status == OK) | (status == SATURATED)
     assert np.all(np.isfinite(r[finite]) & (r[finite] > 0.0))
     assert np.all(np.isin(codes[status == SATURATED], [0, fs]))
-    # high side and transimpedance fall with the code, low side rises (ties only in OPEN/SHORT runs)
-    ordered = np.minimum(r[::-1] if isinstance(fe, LowSideDivider) else r, np.finfo(np.float64).max)
+    # high side and transimpedance fall with the code, low side rises (a ratio read-out falling with
+    # load is a low side); ties only in OPEN/SHORT runs
+    r_rises = isinstance(fe, LowSideDivider) or (isinstance(fe, RatioFrontEnd) and not fe.rises_with_load)
+    ordered = np.minimum(r[::-1] if r_rises else r, np.finfo(np.float64).max)
     assert np.all(np.diff(ordered) <= 0.0)
     # the open sensor's code reads OPEN, or SATURATED at a rail when its level is beyond it
     open_code = int(fe.counts_for(np.inf))
@@ -377,6 +386,8 @@ ALL_FRONT_ENDS = [
     LowSideDivider(5.0, 10e3, 16, adc_reference_v=3.3, adc_offset_counts=7.0),
     Transimpedance(1.0, 10e3, 12, 3.3),
     Transimpedance(0.5, 1e6, 16, 2.5, output_offset_v=0.02, adc_offset_counts=-4.0),
+    RatioFrontEnd(12),
+    RatioFrontEnd(16, rises_with_load=False, adc_offset_counts=3.0),
 ]
 
 
@@ -531,7 +542,7 @@ def test_factory_builds_each_kind() -> None:
 def test_factory_names_unknown_kinds_and_keys() -> None:
     with pytest.raises(
         ValueError,
-        match=r"unknown front end kind 'divider'; allowed kinds: high_side, low_side, transimpedance",
+        match=r"unknown front end kind 'divider'; allowed kinds: high_side, low_side, transimpedance, ratio",
     ):
         front_end_from_kind("divider")
     with pytest.raises(
