@@ -353,6 +353,9 @@ async def test_auto_range_makes_the_peak_bright_at_demo_forces(browser: Any, tmp
         seen["range"] = await text(page, "#scale-range")
         low, high, unit = _range(seen["range"])
         assert low == 0 and 0.6 < high <= 1.5 and unit == "N (auto)", seen
+        # this page is not told the configuration: no what-is-on lines, and no empty heading
+        assert await page.locator("#what-is-on li").count() == 0
+        assert not await page.locator("#what-is-on-title").is_visible()
         shot = tmp_path / "pressure-map.png"
         await page.screenshot(path=str(shot), full_page=True)
         if target := os.environ.get("TACTILE_SCREENSHOT_DEMO"):
@@ -461,7 +464,9 @@ async def test_the_page_says_what_is_on(browser: Any) -> None:
 
         await until_async(listed, 5, "the what-is-on list")
         lines = await page.locator("#what-is-on li").all_text_contents()
+        title_shown = await page.locator("#what-is-on-title").is_visible()
         await page.close()
+    assert title_shown, "the what-is-on list has no heading"
     assert lines[0] == "values: resistance in ohm, float32, input registers 400+32", lines
     assert "force: calibration line (static: no drift correction): 14 channels" in lines, lines
     assert lines[-1] == "writes: none (nothing is ever written to this device)", lines

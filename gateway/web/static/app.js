@@ -572,6 +572,7 @@ function route() {
 // what the gateway does with the device (values, force, drift correction, writes), as
 // check-config says it
 function showWhatIsOn(lines) {
+  $("what-is-on-title").hidden = lines.length === 0; // no heading over an empty list
   const list = $("what-is-on");
   list.replaceChildren(...lines.map((line) => {
     const li = document.createElement("li");
