@@ -20,7 +20,7 @@ at a time):
    default queue), if ``mosquitto`` is installed; frames per second counted from the
    published snapshots (new, ``up`` device snapshots). Both publishers subscribe as
    ``run`` does: what they derive from a snapshot is computed by the poll loop while it
-   waits.
+   waits, and their threads yield the CPU to it (a fast bus: ``gateway.runtime.priority``).
 3. **gateway, skin60-counts**: the same with the raw-counts profile (our physical model of
    each sensor with creep, through the profile's assumed divider), against a bare loop with
    the device in counts mode.
@@ -72,6 +72,7 @@ from gateway.modbus.rtu_line import crc16_modbus
 from gateway.modbus.vendor_fc import VendorRead
 from gateway.mqtt.publisher import MqttPublisher
 from gateway.runtime.poller import Poller
+from gateway.runtime.priority import yield_to_poll_loop
 from gateway.runtime.snapshot import GatewaySnapshot
 from gateway.web import FrameHub
 
@@ -190,7 +191,11 @@ class _StreamThread:
         self.device = device
         self.frames = 0
         self._loop = asyncio.new_event_loop()
-        self._thread = threading.Thread(target=self._loop.run_forever, name="bench-web", daemon=True)
+        self._thread = threading.Thread(target=self._serve, name="bench-web", daemon=True)
+
+    def _serve(self) -> None:
+        yield_to_poll_loop()  # as the web server's thread does beside a fast bus
+        self._loop.run_forever()
 
     def __enter__(self) -> _StreamThread:
         self._thread.start()

@@ -42,6 +42,7 @@ from ..metrics.web_config import WebConfig, load_web_config
 from ..model import Divider
 from ..mqtt.link import MqttLink
 from ..runtime.poller import Poller, SnapshotHolder
+from ..runtime.priority import polls_fast
 from ..runtime.snapshot import VALUED_STATUSES, DeviceSnapshot, GatewaySnapshot
 from ..runtime.summary import device_summary
 from ..web import FrameHub, WebPage
@@ -116,7 +117,10 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
     page = _page(holder, config, page_on, running)
     install = page.install if page is not None else None
     try:
-        server = MetricsServer(registry, config.metrics.host, config.metrics.port, web, install).start()
+        fast = polls_fast(bus.poll_interval_s for bus in config.buses)
+        server = MetricsServer(
+            registry, config.metrics.host, config.metrics.port, web, install, yield_to_polling=fast
+        ).start()
     except OSError as exc:
         log.error("cannot serve metrics on %s:%s: %s", config.metrics.host, config.metrics.port, exc)
         return EXIT_CONFIG

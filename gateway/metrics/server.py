@@ -59,6 +59,7 @@ from aiohttp.http_exceptions import (
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 from prometheus_client.core import CounterMetricFamily, Metric
 
+from ..runtime.priority import yield_to_poll_loop
 from .web_config import BasicAuth, WebConfig
 
 log = logging.getLogger(__name__)
@@ -297,8 +298,11 @@ class MetricsServer:
         max_connections: int = MAX_CONNECTIONS,
         header_timeout_s: float = HEADER_TIMEOUT_S,
         auth_queue: int = AUTH_QUEUE,
+        yield_to_polling: bool = False,
     ) -> None:
         self.registry = registry
+        #: the server's thread yields the CPU to the poll loop (a fast bus: ``runtime.priority``)
+        self.yield_to_polling = yield_to_polling
         self.max_connections = max_connections
         self.header_timeout_s = header_timeout_s
         self.auth_queue = auth_queue
@@ -517,6 +521,8 @@ class MetricsServer:
             await asyncio.wait(waiting)
 
     def _run(self, ready: threading.Event, failure: list[BaseException]) -> None:
+        if self.yield_to_polling:
+            yield_to_poll_loop()
         loop = self._loop
         assert loop is not None
         loop.set_default_executor(ThreadPoolExecutor(WORKERS, thread_name_prefix="tactile-metrics-worker"))

@@ -35,6 +35,7 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 from ..config import GatewayConfig
 from ..config.mqtt import MqttConfig
 from ..runtime.frame import frame_of
+from ..runtime.priority import polls_fast, yield_to_poll_loop
 from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from .payload import encode_binary, encode_json_frame, frame_dict, json_body
 
@@ -243,6 +244,8 @@ class MqttPublisher:
                 self._cond.wait(seconds)
 
     def _run(self) -> None:
+        if polls_fast(bus.poll_interval_s for bus in self._config.buses):
+            yield_to_poll_loop()  # a fast bus: its answers before these frames
         backoff = BACKOFF_INITIAL_S
         socket_open = False
         while True:

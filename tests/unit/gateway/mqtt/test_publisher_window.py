@@ -11,14 +11,18 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import threading
 from typing import Any
 
+import pytest
 from test_mqtt_payload import snapshot
 
 from gateway.config import GatewayConfig, bus_config_for, device_config_for, gateway_config_for
 from gateway.config.mqtt import MqttConfig
 from gateway.model import SensorParams
 from gateway.mqtt.publisher import INFLIGHT_WINDOW, MqttPublisher
+from gateway.runtime.priority import BACKGROUND_NICE
 from gateway.runtime.snapshot import GatewaySnapshot
 
 SUCCESS = 0
@@ -136,3 +140,32 @@ def test_at_qos_0_everything_queued_goes_out_at_once() -> None:
     publisher._drain()
     assert [f["sequence"] for f in client.frames()] == list(range(1, 51))
     assert publisher.stats().published == {"arr": 50} and publisher.stats().queued == 0
+
+
+@pytest.mark.parametrize(
+    ("poll_interval_s", "lowered"), [(0.0, True), (0.005, True), (0.01, False), (0.1, False)]
+)
+def test_the_publisher_thread_yields_to_the_poll_loop_only_beside_a_fast_bus(
+    poll_interval_s: float, lowered: bool
+) -> None:
+    cfg = config(qos=1, queue_frames=10)
+    bus = dataclasses.replace(cfg.buses[0], poll_interval_s=poll_interval_s)
+    cfg = dataclasses.replace(cfg, buses=(bus,))
+    seen: list[int] = []
+    publisher: MqttPublisher | None = None
+
+    class Client(RecordingClient):
+        def connect(self, host: str, port: int, keepalive: int) -> None:
+            """The thread's niceness when it first connects; then ends the run."""
+            seen.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
+            assert publisher is not None
+            with publisher._cond:
+                publisher._stopping = True
+            raise OSError("no broker in this test")
+
+    publisher = MqttPublisher(cfg, client_factory=Client)  # type: ignore[arg-type]
+    before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    publisher.start()
+    publisher.stop()
+    assert seen == [min(19, before + BACKGROUND_NICE) if lowered else before]
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == before
