@@ -190,10 +190,11 @@ class BusWorker:
         t0 = time.monotonic()  # for the duration only (scheduling uses self._mono)
         try:
             reads: list[tuple[RegisterKind, int, list[int]]] = []
-            for req in runner.plan:
+            last = len(runner.plan) - 1
+            for k, req in enumerate(runner.plan):
                 try:
                     if self._has_pending():
-                        regs = await self._read_overlapping(runner, req)
+                        regs = await self._read_overlapping(runner, req, all_steps=k == last)
                     else:
                         regs = await self._read(runner, req)
                 except DeviceExceptionResponse as exc:
@@ -219,8 +220,12 @@ class BusWorker:
         )
         return True
 
-    async def _read_overlapping(self, runner: DeviceRunner, req: ReadRequest) -> list[int]:
-        """``_read``, with the deferred conversions run while the device answers.
+    async def _read_overlapping(
+        self, runner: DeviceRunner, req: ReadRequest, *, all_steps: bool
+    ) -> list[int]:
+        """``_read``, with deferred conversion steps run while the device answers: one step
+        per request, and on the poll's last request (``all_steps``) every step left, since no
+        later request of the poll would overlap them.
 
         The first step is a timer due when the request is out (at once over a network, after
         the request's own wire time on a serial line); the event loop runs a due timer on its
@@ -232,20 +237,20 @@ class BusWorker:
         read suspend earlier, the first step merely runs before the send.
         """
         loop = asyncio.get_running_loop()
-        loop.call_at(loop.time() + self._quiet_s, self._step_pending)
+        loop.call_at(loop.time() + self._quiet_s, self._step_pending, all_steps)
         return await self._read(runner, req)
 
     def _has_pending(self) -> bool:
         return any(r.pending is not None for r in self.runners)
 
-    def _step_pending(self) -> None:
-        """One step of the oldest deferred conversion on this bus; the next step on the
-        event loop's next pass while any is left."""
+    def _step_pending(self, all_steps: bool = False) -> None:
+        """One step of the oldest deferred conversion on this bus; with ``all_steps`` the next
+        on the event loop's next pass, while any is left."""
         for runner in self.runners:
             if runner.pending is not None:
                 self._advance(runner, to_end=False)
-                if self._has_pending():
-                    asyncio.get_running_loop().call_soon(self._step_pending)
+                if all_steps and self._has_pending():
+                    asyncio.get_running_loop().call_soon(self._step_pending, True)
                 return
 
     def settle_all(self) -> None:
