@@ -16,7 +16,10 @@
 An event stream holds a connection for as long as it runs (the server keeps a share of its
 connections for ``/metrics``); a write that a client does not take within
 ``write_timeout_s`` (it stopped reading: the socket's buffers are full) ends that stream and
-closes its connection, counted in ``stalled_total``.
+closes its connection, counted in ``stalled_total``. An event stream's socket keeps at most
+``STREAM_SEND_BUFFER_BYTES`` in the kernel (the kernel would otherwise grow it to megabytes
+for a client that does not read): a stalled reader is found after that much, whatever the
+frame rate, and holds no more memory.
 
 The hub is attached to the server's loop while the application runs (``on_startup``) and
 every stream is ended when it stops (``on_shutdown``), so a stop never waits on a client.
@@ -28,6 +31,7 @@ import asyncio
 import contextlib
 import json
 import math
+import socket
 import time
 from collections.abc import Callable, Iterable
 from importlib import resources
@@ -51,6 +55,10 @@ STATIC_FILES: dict[str, str] = {
 KEEPALIVE_S = 15.0
 #: a stream's write not taken by the client within this ends the stream (a stalled reader)
 WRITE_TIMEOUT_S = 10.0
+#: an event stream's kernel send buffer (bytes; the kernel doubles it for its bookkeeping):
+#: over a second of frames of a 64-channel array at 100 polls/s, far below the megabytes
+#: the kernel's autotuning would let a stalled client hold
+STREAM_SEND_BUFFER_BYTES = 128 * 1024
 _SSE_HEADERS = {"Content-Type": "text/event-stream", "Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
 _ENDED = (ConnectionError, RuntimeError)  # the client went away mid-write
 
@@ -188,6 +196,10 @@ class WebPage:
         return web.Response(body=body, headers={"Content-Type": "application/json"})
 
     async def _open_events(self, resp: web.StreamResponse, request: web.Request) -> None:
+        sock = request.transport.get_extra_info("socket") if request.transport is not None else None
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, STREAM_SEND_BUFFER_BYTES)
         await resp.prepare(request)
         await self._write(resp, request, b"retry: 1000\n\n")
 

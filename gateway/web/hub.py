@@ -25,7 +25,7 @@ deterministically in tests.
 from __future__ import annotations
 
 import threading
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -204,12 +204,23 @@ class FrameHub:
             self._wake_pending = False
 
     def drain(self) -> None:
-        """Encode the waiting polls once each and offer them to every client."""
+        """Encode the waiting polls once each and offer them to every client.
+
+        Of a device's waiting polls only the newest ``stream_capacity`` can reach a client (a
+        stream queue holds no more, a page only the newest): the older ones are not encoded,
+        and every stream counts them lost through the gap in its sequence, as it would have
+        counted them evicted. A flood of polls (or a burst after the loop was held up) thus
+        costs at most one queue's worth of encoding per drain, and the senders keep their
+        share of the loop."""
         with self._lock:
             batch = list(self._inbox)
             self._inbox.clear()
             self._wake_pending = False
+        skip = {name: n - self.stream_capacity for name, n in Counter(n for n, _ in batch).items()}
         for name, entry in batch:
+            if skip[name] > 0:
+                skip[name] -= 1
+                continue
             frame = encode_frame(frame_of(entry.snapshot), entry.seq, entry.counters)
             for q in self._streams.get(name, ()):
                 lost = q.offer(entry.seq, frame)

@@ -18,6 +18,7 @@ from click.testing import CliRunner
 
 from gateway.cli import main
 from gateway.cli.record_cmd import record_live
+from gateway.cli.simulated import PacedClock
 from gateway.config import load_config
 from gateway.runtime.poller import Poller, SnapshotHolder
 from gateway.runtime.snapshot import VALUED_STATUSES, ChannelStatus, GatewaySnapshot
@@ -87,7 +88,13 @@ async def _record_bench(tmp_path: Path) -> Path:
 async def _read_with_calibration(
     tmp_path: Path, cal: Path
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    array = SimArray(ArrayConfig(channels=1, columns=1, seed=SEED, scenario="holds", speed=SPEED / 2), 1)
+    # the device clock may not run more than 5 device seconds ahead between two reads (a
+    # paced clock): a busy machine that polls late slows the device down instead of leaving
+    # a 120 s hold with a handful of samples
+    paced = PacedClock(max_step_s=5.0 / (SPEED / 2))
+    array = SimArray(
+        ArrayConfig(channels=1, columns=1, seed=SEED, scenario="holds", speed=SPEED / 2), 1, clock=paced
+    )
     rows: list[tuple[float, float, float, int]] = []
     end_s = array.scenario.duration_s or 0.0
     played = asyncio.Event()
@@ -116,7 +123,7 @@ async def _read_with_calibration(
             # until the gateway has read the scenario to its end (not a fixed sleep: a busy
             # machine starts the poller late, and the device clock runs from its creation)
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(played.wait(), timeout=10.0 * end_s / (SPEED / 2))
+                await asyncio.wait_for(played.wait(), timeout=30.0 * end_s / (SPEED / 2))
     data = np.array(sorted(set(rows)))
     return data[:, 0], data[:, 1], data[:, 2], data[:, 3].astype(int)
 

@@ -15,6 +15,7 @@ from gateway.modbus.virtual import VirtualDevice, VirtualTransport
 from gateway.model import SensorParams
 from gateway.runtime.poller import Poller, SnapshotHolder
 from gateway.runtime.snapshot import ChannelStatus
+from gateway.web import hub as hub_module
 from gateway.web.hub import FrameHub, PageQueue, StreamQueue
 
 
@@ -121,6 +122,40 @@ def test_an_overflowing_inbox_shows_as_a_gap() -> None:
         hub.on_snapshot(gateway(device("a", t=float(k))))
     sched.run()
     assert seqs(q) == [6, 7, 8] and q.dropped == 5 and hub.inbox_dropped == 5
+
+
+def test_a_burst_longer_than_a_stream_queue_encodes_only_what_can_reach_a_client(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    encoded: list[int] = []
+    real = hub_module.encode_frame
+
+    def counting(frame: object, seq: int, counters: object) -> bytes:
+        encoded.append(seq)
+        return real(frame, seq, counters)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(hub_module, "encode_frame", counting)
+    hub = FrameHub(stream_capacity=4)
+    sched = Scheduled()
+    hub.attach(sched)
+    q, waiting = hub.open_stream("a"), hub.open_stream("a")
+    b0 = device("b", t=0.0)
+    hub.on_snapshot(gateway(device("a", t=0.0), b0))
+    sched.run()
+    assert seqs(q) == [1] and encoded == [1, 1]  # "waiting" keeps its frame 1, unread
+    page = hub.open_page(None, 30.0)
+    for k in range(1, 11):  # the server loop is held up: 10 polls of a and 2 of b, one drain
+        b = device("b", t=float(k)) if k > 8 else b0  # the same snapshot: not a new poll
+        hub.on_snapshot(gateway(device("a", t=float(k)), b))
+    encoded.clear()
+    sched.run()
+    # a's polls 2..7 can reach no client (4 fit in a queue): not encoded, counted lost
+    assert sorted(encoded) == [2, 3, 8, 9, 10, 11]
+    assert seqs(q) == [8, 9, 10, 11] and q.dropped == 6
+    assert seqs(waiting) == [8, 9, 10, 11] and waiting.dropped == 7  # and its unread frame 1
+    assert hub.dropped_total == {"a": 13}
+    newest = {f["device"]: f["seq"] for f in map(json.loads, page.take(0.0))}
+    assert newest == {"a": 11, "b": 3}
 
 
 def test_a_detached_hub_keeps_the_latest_and_queues_nothing() -> None:
