@@ -109,6 +109,15 @@ def vendor_pdu_class(read: VendorRead) -> type[VendorPDU]:
     return cls
 
 
+def _fail_quietly(future: asyncio.Future[Any], exc: BaseException) -> None:
+    """Fail pymodbus' outstanding request with ``exc``. Its awaiter, if any, gets the error;
+    a request already given up (a cancelled poll: the connection is closed under it) has no
+    awaiter, and asyncio would log "Future exception was never retrieved" with a traceback
+    when the future is collected, so the exception is marked as seen here."""
+    future.set_exception(exc)
+    future.exception()
+
+
 def build_ssl_context(tls: TlsSettings) -> ssl.SSLContext:
     """Client TLS context: trust ``ca_file``, present ``cert_file``/``key_file`` if given.
 
@@ -264,7 +273,7 @@ class ModbusTransport(Transport):
             except ModbusIOException:
                 future = getattr(ctx, "response_future", None)
                 if isinstance(future, asyncio.Future) and not future.done():
-                    future.set_exception(ModbusIOException("undecodable answer"))
+                    _fail_quietly(future, ModbusIOException("undecodable answer"))
                 return len(data)
             return used
 
@@ -353,7 +362,7 @@ class ModbusTransport(Transport):
         future = getattr(getattr(client, "ctx", None), "response_future", None)
         if isinstance(future, asyncio.Future) and not future.done():
             # fail the outstanding request now instead of waiting for its timeout
-            future.set_exception(ConnectionException(f"connection to {self.target} lost"))
+            _fail_quietly(future, ConnectionException(f"connection to {self.target} lost"))
 
     # ------------------------------------------------------------------ requests
     async def _execute(self, what: str, request: Awaitable[Any]) -> Any:
