@@ -273,8 +273,12 @@ class FrontEnd(abc.ABC):
             f"{self.kind}: {self._equation()}; ADC {self.adc_bits} bit, FS = {fs}, "
             f"{self._reference_text()}, offset {self.adc_offset_counts:g} counts; "
             f"open -> {self._level_text(x_open, 'OPEN')}, short -> {self._level_text(x_short, 'SHORT')}; "
-            f"reads {_fmt(r_min, 'ohm')} .. {_fmt(r_max, 'ohm')}"
+            f"{self._range_text(r_min, r_max)}"
         )
+
+    def _range_text(self, r_min: float, r_max: float) -> str:
+        """The measurable range as ``describe`` ends with it."""
+        return f"reads {_fmt(r_min, 'ohm')} .. {_fmt(r_max, 'ohm')}"
 
     def _reference_text(self) -> str:
         return f"Vref = {_fmt(self.reference_v, 'V')}"

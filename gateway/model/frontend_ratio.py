@@ -105,15 +105,12 @@ class RatioFrontEnd(FrontEnd):
             return "r/R_ref = FS/code - 1 (counts rise with load: sensor on the high side, eq. 18)"
         return "r/R_ref = code/(FS - code) (counts fall with load: sensor below a pull-up)"
 
-    def describe(self) -> str:
-        """One line for ``check-config``: the equation, the converter, the open/short codes and
-        the measurable range, all in units of the unknown reference resistor."""
-        x_open, x_short = self._code_edges()
-        r_min, r_max = self.measurable_range_ohm()
+    def _reference_text(self) -> str:
+        return "ratiometric"
+
+    def _range_text(self, r_min: float, r_max: float) -> str:
+        """The range in units of the unknown reference resistor, and what that means."""
         return (
-            f"{self.kind}: {self._equation()}; ADC {self.adc_bits} bit, FS = {self.full_scale}, "
-            f"ratiometric, offset {self.adc_offset_counts:g} counts; "
-            f"open -> {self._level_text(x_open, 'OPEN')}, short -> {self._level_text(x_short, 'SHORT')}; "
             f"reads {_relative(r_min)} .. {_relative(r_max)}; values are relative (units of the board's "
             "unknown reference resistor R_ref, not ohm): no circuit value is assumed, and forces "
             "need a calibration (`calibrate`)"
