@@ -88,10 +88,11 @@ async def _record_bench(tmp_path: Path) -> Path:
 async def _read_with_calibration(
     tmp_path: Path, cal: Path
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    # the device clock may not run more than 5 device seconds ahead between two reads (a
-    # paced clock): a busy machine that polls late slows the device down instead of leaving
-    # a 120 s hold with a handful of samples
-    paced = PacedClock(max_step_s=5.0 / (SPEED / 2))
+    # the device clock may not run more than 1 device second ahead between two register reads
+    # (a paced clock; a poll makes 3 reads): a busy machine that polls late slows the device
+    # down instead of leaving a 120 s hold with a handful of samples. Unloaded, the gateway
+    # reads more often than that, and the clock is the wall clock.
+    paced = PacedClock(max_step_s=1.0 / (SPEED / 2))
     array = SimArray(
         ArrayConfig(channels=1, columns=1, seed=SEED, scenario="holds", speed=SPEED / 2), 1, clock=paced
     )
