@@ -80,10 +80,22 @@ class Device:
             if chunk:
                 data += chunk
                 continue
-            if time.monotonic() > deadline:
+            left = deadline - time.monotonic()
+            if left <= 0:
                 raise AssertionError(f"no request of {size} bytes (got {data.hex()})")
-            await asyncio.sleep(0.001)  # polling the line for bytes
+            await self._readable(left)
         return bytes(data)
+
+    async def _readable(self, timeout_s: float) -> None:
+        """Until the device's end of the line has bytes to read (or ``timeout_s`` passes)."""
+        loop = asyncio.get_running_loop()
+        ready = asyncio.Event()
+        loop.add_reader(self.fd, ready.set)
+        try:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(ready.wait(), timeout_s)
+        finally:
+            loop.remove_reader(self.fd)
 
     def send(self, data: bytes) -> None:
         assert os.write(self.fd, data) == len(data)
