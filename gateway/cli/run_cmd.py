@@ -117,7 +117,7 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
     page = _page(holder, config, page_on, running)
     install = page.install if page is not None else None
     try:
-        fast = polls_fast(bus.poll_interval_s for bus in config.buses)
+        fast = polls_fast(config)
         server = MetricsServer(
             registry, config.metrics.host, config.metrics.port, web, install, yield_to_polling=fast
         ).start()

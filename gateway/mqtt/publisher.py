@@ -244,7 +244,7 @@ class MqttPublisher:
                 self._cond.wait(seconds)
 
     def _run(self) -> None:
-        if polls_fast(bus.poll_interval_s for bus in self._config.buses):
+        if polls_fast(self._config):
             yield_to_poll_loop()  # a fast bus: its answers before these frames
         backoff = BACKOFF_INITIAL_S
         socket_open = False

@@ -461,7 +461,9 @@ class BusWorker:
                 next_cycle = max(next_cycle, self._first_due())
             if next_cycle > now:
                 self.settle_all()
-                await asyncio.sleep(next_cycle - now)
+                # the conversions just run took time of their own: wake at next_cycle, not
+                # that much after it (which would make every cycle late by its conversions)
+                await asyncio.sleep(max(0.0, next_cycle - self._mono()))
                 back_to_back = 0
             else:
                 # a cycle that waited on a device has let the loop run; one that never waited

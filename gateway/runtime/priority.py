@@ -21,7 +21,8 @@ import logging
 import os
 import sys
 import threading
-from collections.abc import Iterable
+
+from ..config import GatewayConfig
 
 __all__ = ["BACKGROUND_NICE", "FAST_POLL_INTERVAL_S", "polls_fast", "yield_to_poll_loop"]
 
@@ -33,9 +34,10 @@ BACKGROUND_NICE = 10
 FAST_POLL_INTERVAL_S = 0.01
 
 
-def polls_fast(poll_intervals_s: Iterable[float]) -> bool:
-    """Whether any bus of these poll intervals (s) is a fast bus (``FAST_POLL_INTERVAL_S``)."""
-    return any(float(interval) < FAST_POLL_INTERVAL_S for interval in poll_intervals_s)
+def polls_fast(config: GatewayConfig) -> bool:
+    """Whether ``config`` has a fast bus: one polled more often than every
+    ``FAST_POLL_INTERVAL_S`` (its ``poll_interval_s``, in s)."""
+    return any(bus.poll_interval_s < FAST_POLL_INTERVAL_S for bus in config.buses)
 
 
 def yield_to_poll_loop() -> int | None:

@@ -15,7 +15,9 @@ from typing import TypeVar
 import pytest
 from prometheus_client import CollectorRegistry
 
+from gateway.config import bus_config_for, device_config_for, gateway_config_for
 from gateway.metrics.server import MetricsServer
+from gateway.model import SensorParams
 from gateway.runtime import priority
 from gateway.runtime.priority import BACKGROUND_NICE, FAST_POLL_INTERVAL_S, polls_fast, yield_to_poll_loop
 
@@ -133,7 +135,18 @@ def test_a_refusal_is_none_and_leaves_the_niceness(monkeypatch: pytest.MonkeyPat
 )
 def test_a_fast_bus_polls_more_often_than_every_10_ms(intervals: tuple[float, ...], fast: bool) -> None:
     assert FAST_POLL_INTERVAL_S == 0.01
-    assert polls_fast(intervals) is fast
+    buses = [
+        bus_config_for(
+            f"b{k}",
+            "tcp",
+            [device_config_for(f"d{k}", 1, [SensorParams()] * 4, 2, 2.5)],
+            host="127.0.0.1",
+            port=502 + k,
+            poll_interval_s=interval,
+        )
+        for k, interval in enumerate(intervals)
+    ]
+    assert polls_fast(gateway_config_for(buses)) is fast
 
 
 @pytest.mark.parametrize("fast", [True, False])
