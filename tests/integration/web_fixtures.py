@@ -29,6 +29,7 @@ from gateway.runtime.snapshot import GatewaySnapshot
 from gateway.runtime.summary import device_summary
 from gateway.web import FrameHub, WebPage
 from gateway.web.app import WRITE_TIMEOUT_S
+from gateway.web.hub import Latest
 from sim_device import ArrayConfig, SimArray, serve_tcp
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
@@ -49,6 +50,21 @@ async def until(cond: Callable[[], object], timeout_s: float, what: str, step_s:
         if time.monotonic() - t0 > timeout_s:
             pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
         await asyncio.sleep(step_s)
+
+
+async def first_poll(gw: Gateway, device: str = "arr", timeout_s: float = 10) -> Latest:
+    """The hub's entry of ``device`` once a poll of it has completed (``seq`` 1 or more). The
+    hub lists a device as soon as the poller starts, with a placeholder snapshot (seq 0, no
+    frame) until its first poll completes, which a busy machine can take a while to do."""
+
+    def polled() -> bool:
+        entry = gw.hub.latest(device)
+        return entry is not None and entry.seq > 0
+
+    await until(polled, timeout_s, f"a poll of {device}")
+    entry = gw.hub.latest(device)
+    assert entry is not None and entry.snapshot.polled
+    return entry
 
 
 async def until_async(cond: Callable[[], object], timeout_s: float, what: str, step_s: float = 0.05) -> float:
