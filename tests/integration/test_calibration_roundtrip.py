@@ -10,10 +10,10 @@ with the bench's reference force.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from gateway.cli import main
@@ -123,17 +123,35 @@ async def _read_with_calibration(
         async with Poller(load_config(cfg_path), holder):
             # until the gateway has read the scenario to its end (not a fixed sleep: a busy
             # machine starts the poller late, and the device clock runs from its creation)
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(played.wait(), timeout=30.0 * end_s / (SPEED / 2))
+            backstop_s = 30.0 * end_s / (SPEED / 2)
+            try:
+                await asyncio.wait_for(played.wait(), timeout=backstop_s)
+            except TimeoutError:
+                last = max((r[0] for r in rows), default=float("nan"))
+                pytest.fail(
+                    f"the read-back did not reach the scenario's end ({end_s:g} device s) in "
+                    f"{backstop_s:g} s: last device time {last:g} s, {len(rows)} snapshots up"
+                )
     data = np.array(sorted(set(rows)))
     return data[:, 0], data[:, 1], data[:, 2], data[:, 3].astype(int)
 
 
-def _assert_every_hold_read(reference_n: np.ndarray, levels: tuple[float, ...] = (0.5, 2.0, 5.0)) -> None:
-    """At least 20 samples at each of these levels of the ``holds`` scenario."""
+def _assert_every_hold_read(
+    reference_n: np.ndarray, levels: tuple[float, ...] = (0.5, 2.0, 5.0), *, read: tuple[np.ndarray, ...] = ()
+) -> None:
+    """At least 20 samples at each of these levels of the ``holds`` scenario. ``read``: the
+    whole read-back (device time, reference, status), described in the message of a failure."""
     for level in levels:
         n = int(np.count_nonzero(np.isclose(reference_n, level)))
-        assert n >= 20, f"only {n} settled samples at {level} N"
+        detail = ""
+        if read:
+            t, reference, status = read
+            at = np.isclose(reference, level)
+            codes, counts = np.unique(status[at], return_counts=True)
+            kinds = {int(c): int(k) for c, k in zip(codes, counts, strict=True)}
+            span = f"{t[at].min():g}-{t[at].max():g} s" if at.any() else "none"
+            detail = f" (read at {level} N: {int(at.sum())} samples, device time {span}, statuses {kinds})"
+        assert n >= 20, f"only {n} settled samples at {level} N{detail}"
 
 
 def test_calibrated_gateway_reads_within_a_tenth_of_a_newton(tmp_path: Path) -> None:
@@ -155,7 +173,7 @@ def test_calibrated_gateway_reads_within_a_tenth_of_a_newton(tmp_path: Path) -> 
     )
     # every hold of the read-back (0.5, 2 and 5 N) is read, whatever the machine's load (a count
     # of samples over all was a timing assumption: a busy machine polls less often)
-    _assert_every_hold_read(reference[settled])
+    _assert_every_hold_read(reference[settled], read=(t, reference, status))
     assert within >= 0.95
 
     # the same sensor read with the default parameters is measurably worse
