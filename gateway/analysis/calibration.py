@@ -35,7 +35,8 @@ from ..model.curves import CurveChannel
 from .candidates import Candidate, hold_drift_pct, rank_candidates
 from .diagnostics import residual_axes
 from .discrepancy import decimate
-from .fitting import FitData, FitResult, fit_channel
+from .fit_data import FloatArray
+from .fitting import FitData, FitResult, fit_channel, invert_drift_corrected
 from .measurement import NoiseModel, noise_model, time_is_real
 from .objectives import OFFSET
 from .records import ChannelRecord
@@ -118,6 +119,20 @@ class Calibration:
     candidates: tuple[Candidate, ...] = field(default=())
     #: per calibration name: the drift across held-out holds (% of full scale; NaN: no hold)
     hold_drift_pct_fs: Mapping[str, float] = field(default_factory=dict)
+    #: how far beyond the record's lowest and highest force the model reads the record's own
+    #: end loads (N, ``end_noise_margin_n``: bias + 3 sigma): the calibrated range reaches this
+    #: far beyond the record's, so that a reading of an end load is not flagged extrapolated
+    #: for its noise alone
+    range_margin_n: tuple[float, float] = (0.0, 0.0)
+
+    def calibrated_range_n(self, kind: str = "physics") -> tuple[float, float]:
+        """The range written as ``calibrated_min_n``/``calibrated_max_n`` (N) for a channel
+        read with ``kind``: the physical model's range (the record's + the zero offset) or,
+        for a rival (which reads F_ref), the record's, widened at each end by
+        ``range_margin_n`` (the low end never below half of itself)."""
+        low, high = self.force_range_n if kind == "physics" else self.record_range_n
+        below, above = self.range_margin_n
+        return max(low - below, 0.5 * low), high + above
 
     @property
     def line_force_rms_n(self) -> float:
@@ -224,7 +239,9 @@ class Calibration:
                 "floor_force_n": self.noise_floor_force_n,
             },
             "force_range_n": list(self.force_range_n),
-            "model_force_range_n": list(model_force_range(self.force_range_n)),
+            "calibrated_range_n": list(self.calibrated_range_n()),
+            "range_margin_n": list(self.range_margin_n),
+            "model_force_range_n": list(model_force_range(self.calibrated_range_n())),
             "configured_force_range_n": list(self.configured_range_n),
             "rows_outside_configured_range": self.rows_outside_configured,
             "notes": list(self.notes),
@@ -253,6 +270,43 @@ def model_force_range(calibrated_n: tuple[float, float]) -> tuple[float, float]:
     them and the calibrated range the model reads forces flagged ``extrapolated``."""
     low, high = calibrated_n
     return min(low / MODEL_RANGE_BELOW, LIGHT_TOUCH_N), MODEL_RANGE_ABOVE * high
+
+
+#: The calibrated range reaches this many standard deviations of the reading noise beyond
+#: the record's ends (a reading of the end force lies beyond it with probability 0.13 %) ...
+RANGE_MARGIN_SIGMA = 3.0
+#: ... the noise measured on the rows whose reference lies within this share of the record's
+#: span of each end.
+RANGE_END_BAND = 0.1
+
+
+def end_noise_margin_n(
+    reference_n: FloatArray, force_read_n: FloatArray, record_range_n: tuple[float, float]
+) -> tuple[float, float]:
+    """How far beyond each end of the record's loaded range (N) the calibrated model reads
+    the record's own end loads: the reading's bias there (the median of read - reference, where
+    it points outward) + ``RANGE_MARGIN_SIGMA`` x the reading's scatter. ``reference_n``: the
+    reference force as the model reads it (F_ref + the fitted zero offset); ``force_read_n``:
+    the record read back with the calibrated model, row by row (drift-corrected, not capped at
+    the range). Both over the consecutive rows whose reference lies within ``RANGE_END_BAND``
+    of the span of that end; the scatter is the robust second-difference estimate 1.4826
+    median|x[k-1] - 2 x[k] + x[k+1]| / sqrt(6) (a hold's creep and a ramp's slope cancel in a
+    second difference, a step between two loads is an outlier the median ignores). 0 where
+    fewer than 5 such triples exist."""
+    lo, hi = record_range_n
+    band = RANGE_END_BAND * max(hi - lo, 0.0)
+    out: list[float] = []
+    for end, outward in ((lo, -1.0), (hi, 1.0)):
+        near = (reference_n > 0) & (np.abs(reference_n - end) <= band) & np.isfinite(force_read_n)
+        triple = near[:-2] & near[1:-1] & near[2:]
+        d2 = (force_read_n[:-2] - 2.0 * force_read_n[1:-1] + force_read_n[2:])[triple]
+        if d2.size < 5:
+            out.append(0.0)
+            continue
+        sigma = 1.4826 * float(np.median(np.abs(d2))) / math.sqrt(6.0)
+        bias = outward * float(np.median((force_read_n - reference_n)[near]))
+        out.append(max(bias, 0.0) + RANGE_MARGIN_SIGMA * sigma)
+    return out[0], out[1]
 
 
 def has_both_directions(data: FitData, share: float = 0.1) -> bool:
@@ -344,6 +398,10 @@ def calibrate(
             f"objective's {other.gap_test.force_rms_n:.4g} N"
         )
     rivals = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test)
+    # the record read as the gateway will read it: the model's written range, not capped at the top
+    reach = model_force_range((fit.params.force_min_n, fit.params.force_max_n))
+    uncapped = replace(fit.params, force_min_n=reach[0], force_max_n=reach[1])
+    read_n = invert_drift_corrected(data, fit.effects, uncapped)
     test = data.test
     cands = tuple(rank_candidates(data, real_time=time_is_real(meta)))
     fs = float(hi)
@@ -366,6 +424,7 @@ def calibrate(
         noise=noise,
         noise_floor_log=noise.floor_log(test),
         noise_floor_force_n=rivals.force_noise_floor_n(noise.sigma_log[test], data.resistance_ohm[test]),
+        range_margin_n=end_noise_margin_n(data.force_n + fit.force_offset_n, read_n, (lo, hi)),
         force_range_n=(fit.params.force_min_n, fit.params.force_max_n),
         record_range_n=(ranged.force_min_n, ranged.force_max_n),
         configured_range_n=configured,
@@ -490,7 +549,8 @@ def calibration_file(
     rename = dict(names or {})
     meta_comments = tuple(
         f"reference zero offset fitted: {c.offset_words()} ({rename.get(c.channel, c.channel)}: "
-        "its calibrated_min_n/calibrated_max_n are the record's range + offset)"
+        "its calibrated_min_n/calibrated_max_n are the record's range + offset, widened by the "
+        "reading's end margin)"
         for c in items
         if c.offset_words()
     )
@@ -508,8 +568,8 @@ def calibration_file(
             kind = cal.candidates[0].name
         rms = cal.force_rms().get(kind, math.nan)
         params = {est.name: float(est.value) for est in cal.fit.estimates if est.name in known}
-        # a rival reads F_ref, so its channel keeps the record's own range
-        low, high = cal.force_range_n if kind == "physics" else cal.record_range_n
+        # a rival reads F_ref, so its channel keeps the record's own range (widened by the noise)
+        low, high = cal.calibrated_range_n(kind)
         # the physical model reads beyond the calibrated range (flagged extrapolated there);
         # a rival's own range is the calibrated one, and it reads beyond it along itself
         model_low, model_high = model_force_range((low, high)) if kind == "physics" else (low, high)
@@ -544,7 +604,7 @@ def calibration_file(
                 )
             conversions[name] = ConversionTable("line", values, comments)
         elif (cand := cal.candidate(kind)) is not None:
-            values = curve_table(cand.channel, cal.record_range_n)
+            values = curve_table(cand.channel, cal.calibrated_range_n(kind))
             values["held_out_force_rms_n"] = float(cand.held_out_force_rms_n)
             conversions[name] = ConversionTable("curve", values)
         elif kind == "lookup":
@@ -615,8 +675,12 @@ def format_report(cal: Calibration) -> str:
     out = [f"channel {cal.channel} of {cal.record}: effects {', '.join(fit.effects)}"]
     out.append(f"rows: {fit.n_train} training, {fit.n_test} held out, unusable {cal.unusable}")
     lo, hi = cal.force_range_n
+    low, high = cal.calibrated_range_n()
+    below, above = cal.range_margin_n
     out.append(
         f"force range calibrated: {lo:.3g}-{hi:.4g} N, written as calibrated_min_n/calibrated_max_n "
+        f"{low:.3g}-{high:.4g} N (widened to where the model reads the record's end loads, "
+        f"bias + 3 sigma: -{below:.2g}/+{above:.2g} N) "
         f"(configured {cal.configured_range_n[0]:g}-{cal.configured_range_n[1]:g} N; "
         f"{cal.rows_outside_configured} rows outside it, none capped in the fit-quality numbers)"
         + (
@@ -682,14 +746,12 @@ def format_report(cal: Calibration) -> str:
 
 def outside_range_words(cal: Calibration) -> list[str]:
     """What the channel reads outside its calibrated range (lines of the report)."""
-    lo, hi = cal.force_range_n
-    model_lo, model_hi = model_force_range(cal.force_range_n)
+    lo, hi = cal.calibrated_range_n()
+    model_lo, model_hi = model_force_range((lo, hi))
     rival = ""
     if cal.offset_words():
-        rival = (
-            f" (written as a line, lookup or curve: outside the record's "
-            f"{cal.record_range_n[0]:.3g}-{cal.record_range_n[1]:.4g} N)"
-        )
+        r_lo, r_hi = cal.calibrated_range_n("line")
+        rival = f" (written as a line, lookup or curve: outside {r_lo:.3g}-{r_hi:.4g} N)"
     return [
         f"outside the calibrated range: below {lo:.3g} N and above {hi:.4g} N the channel reads forces "
         f"extrapolated along its curve, flagged `extrapolated`{rival}; at or below 0 N it reads no_contact",

@@ -169,13 +169,16 @@ def test_a_channel_calibrated_on_half_to_five_newtons_reads_beyond_it_flagged_ex
     args = ["calibrate", str(bench), "--out", str(cal_path), "--model", "physics"]
     result = CliRunner().invoke(main, [*args, "--objective", "log-r", "--force-offset", "none"])
     assert result.exit_code == 0, result.output
-    assert (
-        "outside the calibrated range: below 0.5 N and above 5 N the channel reads forces extrapolated "
-        "along its curve, flagged `extrapolated`; at or below 0 N it reads no_contact"
-    ) in result.output
     table = tomllib.loads(cal_path.read_text())["channel"]["tip"]
-    assert (table["calibrated_min_n"], table["calibrated_max_n"]) == (0.5, 5.0)
-    assert (table["force_min_n"], table["force_max_n"]) == (0.01, 15.0)
+    low, high = table["calibrated_min_n"], table["calibrated_max_n"]
+    # the record's 0.5-5 N, widened by the reading noise at each end (checked against the
+    # readings' own spread below): a few percent of the range, not a blindfold
+    assert 0.45 < low < 0.5 and 5.0 < high < 5.5, (low, high)
+    assert (
+        f"outside the calibrated range: below {low:.3g} N and above {high:.4g} N the channel reads forces "
+        "extrapolated along its curve, flagged `extrapolated`; at or below 0 N it reads no_contact"
+    ) in result.output
+    assert (table["force_min_n"], table["force_max_n"]) == (0.01, 3 * high)
     config = parse_config(
         f"""
 [[bus]]
@@ -197,10 +200,10 @@ name = "tip"
         tmp_path / "gateway.toml",
     )
     device = config.buses[0].devices[0]
-    assert device.channels[0].calibrated_range_n == (0.5, 5.0)
+    assert device.channels[0].calibrated_range_n == (low, high)
     proc = DeviceProcessor(device, "bench", 0.5)
     holds = tmp_path / "holds.csv"
-    t, f = _write(holds, [0.0, 0.3, 2.0, 8.0, 0.0], 100.0, seed=32)
+    t, f = _write(holds, [0.0, 0.3, 0.5, 2.0, 5.0, 8.0, 0.0], 100.0, seed=32)
     r = read_record(holds).channel("tip").resistance_ohm
     state = proc.initial_state()
     seen: dict[float, list[tuple[str, float]]] = {}
@@ -211,9 +214,17 @@ name = "tip"
             seen.setdefault(float(f[k]), []).append(
                 (ChannelStatus(int(snap.status[0])).label, snap.force_n[0])
             )
+    # the record's own end forces read ok: a reading of 5 N is noisy, and about half of them
+    # lie above 5 N, inside the noise of a calibrated one
+    at_top = np.array([v for _, v in seen[5.0]])
+    assert np.mean(at_top > 5.0) > 0.2
+    # the margin is 3 standard deviations of what a reading at the top actually scatters by
+    assert 2.0 < (high - 5.0) / np.std(at_top) < 4.5, (high, np.std(at_top))
     for load, label, tolerance_n in (
         (0.3, "extrapolated", 0.02),
+        (0.5, "ok", 0.02),
         (2.0, "ok", 0.05),
+        (5.0, "ok", 0.1),
         (8.0, "extrapolated", 0.2),
     ):
         assert {s for s, _ in seen[load]} == {label}, (load, seen[load][:3])

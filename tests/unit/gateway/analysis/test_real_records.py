@@ -126,10 +126,15 @@ def test_auto_writes_the_best_calibration_and_the_offset_corrected_force_range()
     text = calibration_toml([thinsil], model="physics", names={"0": "tip"})
     # the calibrated range is the record's + the fitted zero offset, and the meta says so; the
     # physical model's own range reaches from light touch to 3 x the top (extrapolated between)
-    low, high = thinsil.force_range_n
+    fit_low, fit_high = thinsil.force_range_n
+    assert abs(fit_high - (3.2404 + thinsil.fit.force_offset_n)) < 1e-3 and thinsil.fit.force_offset_n < 0
+    # ... widened by the reading noise at each end (3 sigma; never below half the low end)
+    below, above = thinsil.range_margin_n
+    low, high = thinsil.calibrated_range_n()
+    assert min(below, above) >= 0.0
+    assert (low, high) == (max(fit_low - below, fit_low / 2), fit_high + above)
     assert f"calibrated_max_n = {high!r}" in text and f"calibrated_min_n = {low!r}" in text
     assert f"force_max_n = {3 * high!r}" in text and f"force_min_n = {min(low / 10, 0.01)!r}" in text
-    assert abs(high - (3.2404 + thinsil.fit.force_offset_n)) < 1e-3 and thinsil.fit.force_offset_n < 0
     assert "# reference zero offset fitted: " in text and "record's range + offset" in text
     # a rival reads F_ref, so its channel keeps the record's own range
     line = calibration_toml([thinsil], model="line", names={"0": "tip"})

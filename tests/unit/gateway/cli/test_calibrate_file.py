@@ -58,7 +58,7 @@ name = "pad3"
     assert fitted and {k: getattr(channel.params, k) for k in fitted} == fitted
     low, high = fit["model_force_range_n"]
     assert (channel.params.force_min_n, channel.params.force_max_n) == (low, high)
-    assert channel.calibrated_range_n == tuple(fit["force_range_n"])
+    assert channel.calibrated_range_n == tuple(fit["calibrated_range_n"])
     assert channel.conversion is None and channel.baseline_ohm is None
     # calibrate --out replaces the file it wrote (it is a calibration file)
     again = CliRunner().invoke(
