@@ -281,19 +281,19 @@ RANGE_END_BAND = 0.1
 
 
 def end_noise_margin_n(
-    reference_n: FloatArray, force_read_n: FloatArray, record_range_n: tuple[float, float]
+    reference_n: FloatArray, force_read_n: FloatArray, range_n: tuple[float, float]
 ) -> tuple[float, float]:
-    """How far beyond each end of the record's loaded range (N) the calibrated model reads
-    the record's own end loads: the reading's bias there (the median of read - reference, where
-    it points outward) + ``RANGE_MARGIN_SIGMA`` x the reading's scatter. ``reference_n``: the
-    reference force as the model reads it (F_ref + the fitted zero offset); ``force_read_n``:
-    the record read back with the calibrated model, row by row (drift-corrected, not capped at
-    the range). Both over the consecutive rows whose reference lies within ``RANGE_END_BAND``
-    of the span of that end; the scatter is the robust second-difference estimate 1.4826
-    median|x[k-1] - 2 x[k] + x[k+1]| / sqrt(6) (a hold's creep and a ramp's slope cancel in a
-    second difference, a step between two loads is an outlier the median ignores). 0 where
-    fewer than 5 such triples exist."""
-    lo, hi = record_range_n
+    """How far beyond each end of the record's loaded range ``range_n`` (N) the calibrated
+    model reads the record's own end loads: the reading's bias there (the median of read -
+    reference, where it points outward) + ``RANGE_MARGIN_SIGMA`` x the reading's scatter.
+    ``reference_n`` and ``range_n`` are as the model reads them (F_ref + the fitted zero
+    offset); ``force_read_n``: the record read back with the calibrated model, row by row
+    (drift-corrected, not capped at the range). Both over the consecutive rows whose reference
+    lies within ``RANGE_END_BAND`` of the span of that end; the scatter is the robust
+    second-difference estimate 1.4826 median|x[k-1] - 2 x[k] + x[k+1]| / sqrt(6) (a hold's
+    creep and a ramp's slope cancel in a second difference, a step between two loads is an
+    outlier the median ignores). 0 where fewer than 5 such triples exist."""
+    lo, hi = range_n
     band = RANGE_END_BAND * max(hi - lo, 0.0)
     out: list[float] = []
     for end, outward in ((lo, -1.0), (hi, 1.0)):
@@ -398,10 +398,13 @@ def calibrate(
             f"objective's {other.gap_test.force_rms_n:.4g} N"
         )
     rivals = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test)
-    # the record read as the gateway will read it: the model's written range, not capped at the top
-    reach = model_force_range((fit.params.force_min_n, fit.params.force_max_n))
+    # the record read as the gateway will read it: the model's written range, not capped at the
+    # top; its ends and the reference as the model reads them (F_ref + the fitted zero offset)
+    fitted_range = (fit.params.force_min_n, fit.params.force_max_n)
+    reach = model_force_range(fitted_range)
     uncapped = replace(fit.params, force_min_n=reach[0], force_max_n=reach[1])
     read_n = invert_drift_corrected(data, fit.effects, uncapped)
+    margin = end_noise_margin_n(data.force_n + fit.force_offset_n, read_n, fitted_range)
     test = data.test
     cands = tuple(rank_candidates(data, real_time=time_is_real(meta)))
     fs = float(hi)
@@ -424,8 +427,8 @@ def calibrate(
         noise=noise,
         noise_floor_log=noise.floor_log(test),
         noise_floor_force_n=rivals.force_noise_floor_n(noise.sigma_log[test], data.resistance_ohm[test]),
-        range_margin_n=end_noise_margin_n(data.force_n + fit.force_offset_n, read_n, (lo, hi)),
-        force_range_n=(fit.params.force_min_n, fit.params.force_max_n),
+        range_margin_n=margin,
+        force_range_n=fitted_range,
         record_range_n=(ranged.force_min_n, ranged.force_max_n),
         configured_range_n=configured,
         rows_outside_configured=outside,

@@ -57,14 +57,18 @@ async def first_poll(gw: Gateway, device: str = "arr", timeout_s: float = 10) ->
     hub lists a device as soon as the poller starts, with a placeholder snapshot (seq 0, no
     frame) until its first poll completes, which a busy machine can take a while to do."""
 
+    seen: list[Latest] = []
+
     def polled() -> bool:
         entry = gw.hub.latest(device)
-        return entry is not None and entry.seq > 0
+        if entry is None or entry.seq == 0:
+            return False
+        seen.append(entry)
+        return True
 
     await until(polled, timeout_s, f"a poll of {device}")
-    entry = gw.hub.latest(device)
-    assert entry is not None and entry.snapshot.polled
-    return entry
+    assert seen[-1].snapshot.polled
+    return seen[-1]
 
 
 async def until_async(cond: Callable[[], object], timeout_s: float, what: str, step_s: float = 0.05) -> float:
