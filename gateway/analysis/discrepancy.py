@@ -275,8 +275,8 @@ def decimate(channel: ChannelRecord, max_rows: int = MAX_FIT_ROWS) -> ChannelRec
         return channel
     step = math.ceil(n / max_rows)
     sl = slice(None, None, step)
-    return ChannelRecord(
-        name=channel.name,
+    return replace(
+        channel,
         time_s=channel.time_s[sl],
         resistance_ohm=channel.resistance_ohm[sl],
         force_n=None if channel.force_n is None else channel.force_n[sl],
@@ -350,6 +350,9 @@ def run_discrepancy(
         if not real_time and any(e in TIME_EFFECTS for e in pool):
             notes.append("creep/creep2 not candidates: the record has no real time")
             pool = tuple(e for e in pool if e not in TIME_EFFECTS)
+    zero_noise = channel.zero_noise_note()
+    if zero_noise is not None:
+        notes.append(zero_noise)
     small = decimate(channel)
     if small.n_samples < channel.n_samples:
         notes.append(f"fitted on every {channel.n_samples // small.n_samples}th row ({small.n_samples} rows)")

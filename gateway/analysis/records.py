@@ -6,6 +6,14 @@ what it needs (``time_s``, ``resistance_ohm``; ``force_n`` for fitting) and tole
 it does not (column order, unknown columns). Every problem is a ``RecordError`` naming the
 file, the line and the column; no row is ever dropped silently. Rows that are valid but
 unusable for a fit (open circuit, zero force) are kept, counted and reported.
+
+A reference force slightly below 0 N is a load cell's zero noise at rest (a bench writes
+-0.0002 N): a value at most ``zero_noise_tolerance_n`` below 0 N (the larger of
+``ZERO_NOISE_FLOOR_N`` and ``ZERO_NOISE_SHARE`` of the record's largest reference force) is
+read as 0 N, and the rows so read are counted per channel (``ChannelRecord.zero_noise_rows``,
+``zero_noise_note``). Every model of the project takes F >= 0 (the contact term goes as
+1/sqrt(F)), and a sensor at rest is unloaded: reading the noise as 0 N keeps the format's
+meaning, a force >= 0, for everything downstream. Below the tolerance a force is refused.
 """
 
 from __future__ import annotations
@@ -18,7 +26,7 @@ import os
 import stat
 from array import array
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TextIO
 
@@ -31,6 +39,10 @@ from ..errors import RecordError
 FloatArray = NDArray[np.float64]
 
 REQUIRED_COLUMNS: tuple[str, ...] = ("time_s", "resistance_ohm")
+#: A reference force below 0 N by at most max(ZERO_NOISE_FLOOR_N, ZERO_NOISE_SHARE x the
+#: record's largest reference force) is the load cell's zero noise, read as 0 N (N, fraction).
+ZERO_NOISE_FLOOR_N = 0.05
+ZERO_NOISE_SHARE = 0.01
 KNOWN_COLUMNS: tuple[str, ...] = ("time_s", "channel", "resistance_ohm", "force_n", "temperature_c")
 DEFAULT_CHANNEL = "0"
 
@@ -45,10 +57,27 @@ class ChannelRecord:
     force_n: FloatArray | None
     temperature_c: FloatArray | None
     line: NDArray[np.int64]  # the source line of every sample, for messages
+    #: rows whose reference force was below 0 N within the zero-noise tolerance, read as 0 N
+    zero_noise_rows: int = 0
+    #: the lowest such reference force as written (N, <= 0; 0 when there is none)
+    zero_noise_min_n: float = 0.0
+    #: the tolerance the record was read with (N; ``zero_noise_tolerance_n``)
+    zero_noise_tolerance_n: float = ZERO_NOISE_FLOOR_N
 
     @property
     def n_samples(self) -> int:
         return int(self.time_s.size)
+
+    def zero_noise_note(self) -> str | None:
+        """The rows of reference force below 0 N read as 0 N, in words (None: there are none)."""
+        if not self.zero_noise_rows:
+            return None
+        rows = "row" if self.zero_noise_rows == 1 else "rows"
+        return (
+            f"channel {self.name}: {self.zero_noise_rows} {rows} of reference below 0 N accepted as "
+            f"load-cell zero noise (down to {self.zero_noise_min_n:.4g} N, within the tolerance of "
+            f"{self.zero_noise_tolerance_n:.4g} N) and read as 0 N"
+        )
 
     def usable_for_fit(self) -> NDArray[np.bool_]:
         """Rows a fit can use: finite resistance and a positive reference force."""
@@ -96,6 +125,23 @@ class Record:
 
     def _where(self) -> str:
         return str(self.path) if self.path else "<record>"
+
+    @property
+    def zero_noise_rows(self) -> int:
+        """Rows of every channel whose reference force below 0 N was read as 0 N."""
+        return sum(ch.zero_noise_rows for ch in self.channels.values())
+
+    def zero_noise_notes(self) -> list[str]:
+        """``ChannelRecord.zero_noise_note`` of every channel that has such rows."""
+        return [note for ch in self.channels.values() if (note := ch.zero_noise_note()) is not None]
+
+
+def zero_noise_tolerance_n(full_scale_n: float) -> float:
+    """How far below 0 N a reference force may lie and still be a load cell's zero noise (N):
+    max(``ZERO_NOISE_FLOOR_N``, ``ZERO_NOISE_SHARE`` x ``full_scale_n``), ``full_scale_n``
+    the record's largest reference force (N)."""
+    scale = full_scale_n if math.isfinite(full_scale_n) and full_scale_n > 0.0 else 0.0
+    return max(ZERO_NOISE_FLOOR_N, ZERO_NOISE_SHARE * scale)
 
 
 #: A record file larger than this is refused (a 4-million-row record is about 200 MB): an
@@ -251,9 +297,6 @@ def _parse_record(text: str, path: Path | None, where: str, require_force: bool)
             raise RecordError(
                 f"{where}:{line_no}: column {col} (force_n): {row[col - 1].strip()!r} is not finite"
             )
-        if "force_n" in values and values["force_n"] < 0.0:
-            col = index["force_n"] + 1
-            raise RecordError(f"{where}:{line_no}: column {col} (force_n): {values['force_n']} must be >= 0")
         if "temperature_c" in values and not math.isfinite(values["temperature_c"]):
             col = index["temperature_c"] + 1
             raise RecordError(f"{where}:{line_no}: column {col} (temperature_c): not a finite temperature")
@@ -283,7 +326,43 @@ def _parse_record(text: str, path: Path | None, where: str, require_force: bool)
         )
         for name, data in columns.items()
     }
+    channels = _zero_noise(channels, where, index.get("force_n", 0) + 1)
     return Record(path=path, metadata=metadata, channels=channels, extra_columns=extra)
+
+
+def _zero_noise(channels: dict[str, ChannelRecord], where: str, col: int) -> dict[str, ChannelRecord]:
+    """The channels with every reference force below 0 N within the record's zero-noise
+    tolerance read as 0 N and counted; the first one below it (in file order) is refused."""
+    forces = {name: ch.force_n for name, ch in channels.items() if ch.force_n is not None}
+    if not forces:
+        return channels
+    full_scale = max((float(f.max()) for f in forces.values() if f.size), default=0.0)
+    tol = zero_noise_tolerance_n(full_scale)
+    worst: tuple[int, float] | None = None
+    for name, f in forces.items():
+        bad = np.flatnonzero(f < -tol)
+        line = int(channels[name].line[bad[0]]) if bad.size else 0
+        if bad.size and (worst is None or line < worst[0]):
+            worst = (line, float(f[bad[0]]))
+    if worst is not None:
+        raise RecordError(
+            f"{where}:{worst[0]}: column {col} (force_n): {worst[1]!r} is below 0 N by more than the "
+            f"load-cell zero-noise tolerance of {tol:.4g} N (the larger of {ZERO_NOISE_FLOOR_N:g} N and "
+            f"{100 * ZERO_NOISE_SHARE:g} % of the record's largest reference force, {full_scale:.4g} N); "
+            "a reference force must be >= 0"
+        )
+    out = dict(channels)
+    for name, f in forces.items():
+        negative = f < 0.0
+        n = int(np.count_nonzero(negative))
+        out[name] = replace(
+            channels[name],
+            force_n=np.where(negative, 0.0, f),
+            zero_noise_rows=n,
+            zero_noise_min_n=float(f[negative].min()) if n else 0.0,
+            zero_noise_tolerance_n=tol,
+        )
+    return out
 
 
 def _number(text: str, where: str, line: int, col: int, name: str) -> float:

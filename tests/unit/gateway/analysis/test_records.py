@@ -68,7 +68,11 @@ BAD = [
         "r.csv:4: column 1 (time_s): time goes backwards in channel '0'",
     ),
     ("time_s,resistance_ohm\ninf,1\n", "r.csv:2: column 1 (time_s): inf is not a finite time"),
-    ("time_s,resistance_ohm,force_n\n0,1,-1\n", "r.csv:2: column 3 (force_n): -1.0 must be >= 0"),
+    (
+        "time_s,resistance_ohm,force_n\n0,1,-1\n",
+        "r.csv:2: column 3 (force_n): -1.0 is below 0 N by more than the load-cell zero-noise tolerance "
+        "of 0.05 N",
+    ),
     ("time_s,resistance_ohm,force_n\n0,1,inf\n", "r.csv:2: column 3 (force_n): 'inf' is not finite"),
     ("time_s,channel,resistance_ohm\n0,,1\n", "r.csv:2: column 2 (channel): empty channel name"),
     (
@@ -212,3 +216,92 @@ def test_unix_windows_and_old_mac_line_endings_read_the_same(newline: str) -> No
     assert ch.time_s.tolist() == [0.0, 0.5] and ch.resistance_ohm.tolist() == [100.0, math.inf]
     assert ch.force_n is not None and ch.force_n.tolist() == [1.0, 0.0]
     assert ch.line.tolist() == [3, 4]
+
+
+# ----------------------------------------------------------------- load-cell zero noise
+#: A bench's record: at rest the load cell reads a little below 0 N.
+BENCH = """# sensor: bench
+time_s,channel,resistance_ohm,force_n
+0.0,a,inf,-0.0002
+0.0,b,inf,0.0
+0.5,a,inf,0.0001
+0.5,b,inf,-0.0001
+1.0,a,2e4,3.0
+1.0,b,3e4,2.0
+1.5,a,inf,-0.0002
+1.5,b,inf,-0.03
+"""
+
+
+def test_a_reference_force_slightly_below_zero_is_zero_noise_read_as_0_n_and_counted() -> None:
+    rec = parse_record(BENCH)
+    a, b = rec.channel("a"), rec.channel("b")
+    assert a.force_n is not None and b.force_n is not None
+    assert a.force_n.tolist() == [0.0, 0.0001, 3.0, 0.0]
+    assert b.force_n.tolist() == [0.0, 0.0, 2.0, 0.0]
+    assert (a.zero_noise_rows, a.zero_noise_min_n) == (2, -0.0002)
+    assert (b.zero_noise_rows, b.zero_noise_min_n) == (2, -0.03)
+    assert rec.zero_noise_rows == 4
+    # full scale 3 N: 1 % is 0.03 N, below the 0.05 N floor
+    assert a.zero_noise_tolerance_n == 0.05
+    note = a.zero_noise_note()
+    assert note is not None
+    assert "channel a: 2 rows of reference below 0 N accepted as load-cell zero noise" in note
+    assert "-0.0002 N" in note and "0.05 N" in note and "read as 0 N" in note
+    assert rec.zero_noise_notes() == [note, b.zero_noise_note()]
+    # the rows read as 0 N are unloaded rows, counted as such
+    assert a.unusable_counts() == {"open_circuit": 3, "zero_force": 2}
+
+
+def test_a_record_without_negative_forces_has_no_note() -> None:
+    ch = parse_record(GOOD).channel("a")
+    assert ch.zero_noise_rows == 0 and ch.zero_noise_note() is None
+
+
+def test_the_tolerance_is_one_percent_of_the_full_scale_above_5_n() -> None:
+    """49 N full scale: the tolerance is 0.49 N; -0.4 N is noise, -0.6 N is refused."""
+    rec = parse_record("time_s,resistance_ohm,force_n\n0,inf,-0.4\n1,1e3,49\n")
+    ch = rec.channel()
+    assert ch.zero_noise_tolerance_n == pytest.approx(0.49)
+    assert ch.zero_noise_rows == 1 and ch.force_n is not None and ch.force_n[0] == 0.0
+    with pytest.raises(RecordError) as info:
+        parse_record("time_s,resistance_ohm,force_n\n0,inf,-0.6\n1,1e3,49\n", Path("r.csv"))
+    assert str(info.value).startswith("r.csv:2: column 3 (force_n): -0.6 is below 0 N by more than")
+    assert "tolerance of 0.49 N" in str(info.value) and "49 N" in str(info.value)
+
+
+def test_a_force_of_minus_5_n_is_refused_naming_line_column_and_tolerance(tmp_path: Path) -> None:
+    path = tmp_path / "r.csv"
+    text = BENCH.replace("1.0,b,3e4,2.0", "1.0,b,3e4,-5") + "2.0,a,inf,-7\n"
+    path.write_text(text)
+    with pytest.raises(RecordError) as info:
+        read_record(path)
+    message = str(info.value)
+    # the first one in file order (line 8), not the lowest (-7 N on line 11)
+    assert message.startswith(f"{path}:8: column 4 (force_n): -5.0 is below 0 N by more than the load-cell")
+    assert "tolerance of 0.05 N (the larger of 0.05 N and 1 % of the record's largest" in message
+    assert "\n" not in message
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    full_scale=st.floats(0.01, 500.0),
+    shares=st.lists(st.floats(0.0, 2.0), min_size=1, max_size=6),
+)
+def test_property_forces_within_the_tolerance_load_and_beyond_it_are_refused(
+    full_scale: float, shares: list[float]
+) -> None:
+    """Forces of -share x tolerance: accepted and counted when every share <= 1 (minus a
+    rounding margin), refused when one exceeds 1 (plus a margin)."""
+    tol = max(0.05, 0.01 * full_scale)
+    shares = [s for s in shares if abs(s - 1.0) > 1e-6]
+    rows = [f"{k},inf,{-s * tol!r}" for k, s in enumerate(shares)] + [f"{len(shares)},1e3,{full_scale!r}"]
+    text = "time_s,resistance_ohm,force_n\n" + "\n".join(rows) + "\n"
+    if all(s < 1.0 for s in shares):
+        ch = parse_record(text).channel()
+        assert ch.zero_noise_rows == sum(1 for s in shares if s > 0.0)
+        assert ch.force_n is not None and np.all(ch.force_n >= 0.0)
+        assert ch.zero_noise_tolerance_n == pytest.approx(tol)
+    else:
+        with pytest.raises(RecordError, match="zero-noise tolerance"):
+            parse_record(text)
