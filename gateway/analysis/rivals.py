@@ -12,6 +12,7 @@ every report can say plainly which calibration reads force best.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,8 +133,40 @@ def line_range_lines(line: ConductanceLine, record_min_n: float) -> list[str]:
     ]
 
 
-def verdict(model_rms: float, line_rms: float, tie: float = 0.02) -> str:
-    """Plain words: does the model beat, tie or lose to the line on held-out force."""
+def verdict(
+    model_rms: float,
+    rivals: Mapping[str, float] | float,
+    tie: float = 0.02,
+    model_name: str = "the physical model",
+) -> str:
+    """Plain words: does the model beat, tie or lose to its best static rival on held-out force.
+
+    ``rivals``: every static rival's held-out force RMS (N) by name (the line, the lookup, any
+    static curve); the best of them (the lowest finite RMS) is the one compared with and named,
+    never the line alone when another rival reads better. ``model_name``: what is judged
+    (the physical model, or an empirical curve with drift correction). A bare number is the
+    line's alone (the former signature, ``verdict(model_rms, line_rms)``), in the words it
+    always gave."""
+    if not isinstance(rivals, Mapping):
+        return _line_verdict(model_rms, float(rivals), tie)
+    finite = {name: float(v) for name, v in rivals.items() if math.isfinite(v)}
+    if not (math.isfinite(model_rms) and finite):
+        return f"{model_name} and its static rivals cannot be compared on these rows"
+    name, best = min(finite.items(), key=lambda item: item[1])
+    if model_rms <= best * (1.0 - tie):
+        return f"{model_name} wins: {model_rms:.4g} N against the best static rival's ({name}) {best:.4g} N"
+    if model_rms <= best * (1.0 + tie):
+        return (
+            f"{model_name} ties with the best static rival ({name}): {model_rms:.4g} N against {best:.4g} N"
+        )
+    return (
+        f"THE {name.upper()} WINS: {model_name} reads force worse ({model_rms:.4g} N) than the {name} "
+        f"({best:.4g} N), the best static rival on the same held-out rows"
+    )
+
+
+def _line_verdict(model_rms: float, line_rms: float, tie: float) -> str:
+    """The physical model against the line alone (``verdict`` given a bare number)."""
     if not (math.isfinite(model_rms) and math.isfinite(line_rms)):
         return "the model and the line cannot be compared on these rows"
     if model_rms <= line_rms * (1.0 - tie):
