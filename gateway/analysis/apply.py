@@ -5,9 +5,9 @@ gateway would have read it live with the calibration in its device configuration
 
 * **The device.** ``config.calibration_file.calibrated_device``: a float32 (ohm) device whose
   channels are the record's, each named after its calibration table (the same name unless
-  mapped), with parameters, baselines and line / lookup / curve tables from the calibration
-  exactly as ``[[bus.device]] calibration = "..."`` gives them, and the device's default
-  effects (the paper's: the gateway does not read a calibration's ``[meta] effects``).
+  mapped), with parameters, effects (``[meta] effects``; a file without them: the paper's),
+  baselines and line / lookup / curve tables from the calibration exactly as
+  ``[[bus.device]] calibration = "..."`` gives them to the live gateway.
 * **The tracker.** ``runtime.replay.replay``: ``runtime.processor.DeviceProcessor.process``,
   one device sample at a time, the device's clock read from the record's ``time_s`` (so the
   creep state steps by the record's time step). Rows of equal ``time_s`` across channels are
@@ -39,7 +39,6 @@ from ..atomic import atomic_write_text
 from ..config.calibration_file import calibrated_device, calibration_channels, calibration_effects
 from ..config.schema import ChannelConfig
 from ..errors import GatewayError
-from ..model.conversion import LineConversion, LookupConversion
 from ..runtime.processor import DeviceProcessor
 from ..runtime.replay import ChannelSeries, ReplayedChannel, replay
 from ..runtime.snapshot import STATUS_LABELS, ChannelStatus
@@ -102,7 +101,7 @@ class Applied:
     record: Record
     calibration: Path
     channels: tuple[AppliedChannel, ...]
-    effects: tuple[str, ...]  # the physical model's effects (the device's)
+    effects: tuple[str, ...]  # the physical model's effects (the calibration's, as the gateway's)
     fitted_effects: tuple[str, ...] | None  # the calibration's [meta] effects, if it says
     device_samples: int
 
@@ -167,12 +166,9 @@ def _model_label(channel: ChannelConfig) -> str:
     conversion = channel.conversion
     if conversion is None:
         return "physics"
-    if isinstance(conversion, LineConversion):
-        return "line"
-    if isinstance(conversion, LookupConversion):
-        return "lookup"
-    describe = getattr(conversion, "describe", None)
-    return f"curve ({describe()})" if callable(describe) else type(conversion).__name__
+    if conversion.table_kind != "curve":
+        return conversion.table_kind
+    return f"curve ({conversion.describe()})"
 
 
 def calibration_processor(calibration: Path, mapping: Mapping[str, str]) -> DeviceProcessor:
@@ -443,8 +439,8 @@ def format_apply_report(applied: Applied, errors: Sequence[ChannelErrors | None]
     by_model = any(c.model == "physics" for c in applied.channels)
     if by_model and fitted is not None and set(fitted) != set(applied.effects):
         lines.append(
-            f"note: the calibration was fitted with {', '.join(fitted)}; the gateway, and "
-            f"apply, read its [channel] tables with the device's effects ({', '.join(applied.effects)})"
+            f"note: the calibration was fitted with {', '.join(fitted)}; its first channel has no "
+            f"[channel] table, so it is read with the paper's effects ({', '.join(applied.effects)})"
         )
     for ch in applied.channels:
         counts = ", ".join(f"{k} {v}" for k, v in ch.status_counts().items())

@@ -118,8 +118,8 @@ def plot_calibration(cal: Any, channel: Any, out_dir: Path) -> list[Path]:
     predicted = {
         # against F_ref: a fit with a zero offset reads F_ref + offset
         "model": cal.fit.force_inverted_n - cal.fit.force_offset_n,
-        "line": cal.rivals.line.force(data.resistance_ohm),
-        "lookup": cal.rivals.lookup.force(data.resistance_ohm),
+        "line": cal.rivals.line_force_n,
+        "lookup": cal.rivals.lookup_force_n,
     }
     real_time = not any("no real time" in n for n in cal.notes)
     path = out_dir / f"calibration_{cal.channel}.png"

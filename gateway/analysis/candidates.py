@@ -12,12 +12,17 @@ Fitting one candidate (the reference force drives the state, as in the physical 
 
 1. the apparent force the curve should read is x = F (1 + beta s) + a1 K1[F] + a2 K2[F]: K_i
    is a Kelvin element of unit fraction driven by the reference force (exact exponential
-   steps, the tracker's convention), s the direction of the play on the curve's own reading;
+   steps with the loading or the recovery time constant, from the equilibrium at the first
+   load: the tracker's convention, ``gateway.model.drift``), s the direction of the play on the
+   curve's own reading;
 2. the static curve is fitted to (x, R) on the training rows (force-space least squares for
    the power law and the line; pooled adjacent violators for the lookup);
-3. with the curve's x_hat = curve(R), the fractions a1, a2, beta solve the linear least squares
-   x_hat - F = a1 K1 + a2 K2 + beta F s; the time constants and the play width are chosen on
-   a grid by the training residual, then steps 2-3 alternate a few times;
+3. with the curve's x_hat = curve(R), the fractions a1, a2, beta solve the non-negative least
+   squares x_hat - F = a1 K1 + a2 K2 + beta F s (physical signs: a reading creeps up under
+   load and reads high on unloading); the time constants (loading, and recovery as a multiple
+   of it) and the play width are chosen on a grid by the training residual, then steps 2-3
+   alternate a few times. Only time constants the record resolves are tried: at least
+   ``TAU_MIN_STEPS`` sample steps and at most half the record's duration;
 4. for the power law and the line, the curve's two parameters and the fractions are then
    solved together from there (one least-squares problem; the time constants, the width and
    the play's directions stay): the alternation alone moves slowly along the curve's gain,
@@ -30,7 +35,9 @@ resistor) gives the same fit, parameters rescaled, and reads the same forces: th
 steps, bounds and stopping rules see the same numbers either way.
 
 ``rank_candidates`` returns every candidate's held-out force RMS, its drift across held-out
-holds (end minus start error, % of full scale) and its parameter count, best first.
+holds in two groups (``holds.hold_drifts``: right after a higher load, and the others; end
+minus start error, % of full scale), read by the runtime's own tracker
+(``gateway.model.tracker.track_series``), and its parameter count, best first.
 """
 
 from __future__ import annotations
@@ -38,36 +45,30 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, nnls
 
-from ..model.curves import (
-    CURVE_KINDS,
-    DRIFT_FORMS,
-    PLAY_SHARES,
-    CurveChannel,
-    Drift,
-    LineCurve,
-    LookupCurve,
-    PowerLawCurve,
-    StaticCurve,
-    preisach_direction,
-    track_series,
-)
+from ..model.calibrated import LINE_ZERO_MARGIN, CurveChannel
+from ..model.drift import DRIFT_FORMS, PLAY_SHARES, Drift, kelvin_unit_series, play_direction_series
+from ..model.static_curves import CURVE_KINDS, LineCurve, LookupCurve, PowerLawCurve, StaticCurve
+from ..model.tracker import track_series
 from .fitting import FitData
-from .holds import Hold, find_holds, hold_tolerance_n
-from .rivals import LOOKUP_KNOTS, MonotoneLookup
+from .holds import DriftGroups, Hold, drift_groups_pct, find_holds, hold_drifts, hold_tolerance_n
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-TAU1_GRID_S = (1.0, 2.0, 5.0, 10.0, 20.0)
-TAU2_GRID_S = (30.0, 60.0, 120.0, 300.0, 1000.0)
+TAU1_GRID_S = (0.3, 1.0, 3.0, 10.0, 30.0)
+TAU2_GRID_S = (30.0, 100.0, 300.0, 1000.0)
+#: The recovery time constant as a multiple of the loading one (1: symmetric).
+RECOVERY_FACTORS = (1.0, 3.0, 10.0)
 WIDTH_GRID_FS = (0.02, 0.05, 0.1, 0.2)  # play width as a share of the record's full scale
 ALTERNATIONS = 3
+#: A time constant must span this many median sample steps to be resolved by the record.
+TAU_MIN_STEPS = 5.0
 
 
 @dataclass(frozen=True)
@@ -77,9 +78,15 @@ class Candidate:
     name: str
     channel: CurveChannel
     held_out_force_rms_n: float
-    hold_drift_pct_fs: float  # RMS over held-out holds of (end - start) error, % of full scale
+    drift: DriftGroups  # held-out hold drift in two groups, % of full scale
     train_force_rms_n: float
     force_n: FloatArray = field(repr=False)  # the tracked force on every row of the data
+
+    @property
+    def hold_drift_pct_fs(self) -> float:
+        """The larger of the two groups' hold drifts (% FS; NaN without a held-out hold)."""
+        values = [v for v in self.drift.all_pct_fs if math.isfinite(v)]
+        return max(values) if values else math.nan
 
     @property
     def kind(self) -> str:
@@ -98,29 +105,6 @@ def rms(values: FloatArray) -> float:
     v = np.asarray(values, dtype=np.float64)
     v = v[np.isfinite(v)]
     return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
-
-
-def kelvin_response(held_n: FloatArray, dt_s: FloatArray, tau_s: float) -> FloatArray:
-    """z_k = e_k z_{k-1} + (1 - e_k) held_k, e_k = exp(-dt_k / tau), z before the first = 0:
-    a unit-fraction Kelvin element driven by the force held over each interval. Solved in
-    closed form over chunks of at most 600 time constants (no overflow), exactly."""
-    n = held_n.size
-    out = np.empty(n)
-    cum = np.cumsum(dt_s / tau_s)
-    z, start = 0.0, 0
-    while start < n:
-        base = cum[start - 1] if start else 0.0
-        end = max(int(np.searchsorted(cum, base + 600.0, side="left")), start + 1)
-        e = np.exp(-dt_s[start:end] / tau_s)
-        b = (1.0 - e) * held_n[start:end]
-        if end == start + 1:
-            out[start] = e[0] * z + b[0]
-        else:
-            lc = cum[start:end] - base
-            out[start:end] = np.exp(-lc) * (z + np.cumsum(np.exp(lc) * b))
-        z = float(out[end - 1])
-        start = end
-    return out
 
 
 def _line_fit(x: FloatArray, y: FloatArray, rank_deficient: str) -> tuple[float, float]:
@@ -145,10 +129,10 @@ def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> Sta
     g0 = conductance_scale(g)
     if kind == "line":
         # force-space least squares: F = (G - c) / m = alpha G + beta
-        alpha, beta = _line_fit(g, f, "the conductance does not change with force on these rows")
+        alpha, beta = _line_fit(g / g0, f, "the conductance does not change with force on these rows")
         if not alpha > 0.0:
             raise ValueError("the conductance does not rise with force on these rows")
-        return LineCurve(float(1.0 / alpha), float(-beta / alpha))
+        return LineCurve(float(g0 / alpha), float(-beta * g0 / alpha))
     if kind == "power_law":
         # ln(G / g0) = ln(k / g0) + n ln F: p[0] = ln(k / g0), bounded relative to the data
         lg = np.log(g / g0)
@@ -163,14 +147,15 @@ def fit_curve(kind: str, force_n: FloatArray, resistance_ohm: FloatArray) -> Sta
         lnk, n = (float(v) for v in (sol.x if sol.success else (lnk0, n0)))
         return PowerLawCurve(g0 * math.exp(lnk), n)
     if kind == "lookup":
-        lk = MonotoneLookup.fit(f, r, LOOKUP_KNOTS)
-        lr = np.asarray(lk.log_r)
-        keep = np.concatenate([[True], np.diff(lr) > 1e-9])
-        lr, kf = lr[keep], np.asarray(lk.force_n)[keep]
-        if lr.size < 2 or not kf[0] > kf[-1]:
-            raise ValueError("the lookup found no force range on these rows")
-        return LookupCurve(tuple(float(math.exp(v)) for v in lr), tuple(float(v) for v in kf))
+        return LookupCurve.fit(f, r)
     raise ValueError(f"unknown curve kind {kind!r}; allowed: {', '.join(CURVE_KINDS)}")
+
+
+def _reading(curve: StaticCurve, resistance_ohm: FloatArray) -> FloatArray:
+    """The curve's apparent force x (N) at each resistance (an open sensor reads 0 N)."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        x = curve.force(resistance_ohm)
+    return np.asarray(np.where(np.isposinf(resistance_ohm), 0.0, x))
 
 
 def conductance_scale(conductance_s: FloatArray) -> float:
@@ -187,28 +172,38 @@ class _Regressors:
         self.data = data
         f = np.nan_to_num(np.asarray(data.force_n, dtype=np.float64), nan=0.0)
         self.force = f
-        self.held = np.maximum(np.concatenate([[0.0], f[:-1]]), 0.0)
+        first = max(float(f[0]), 0.0) if f.size else 0.0
+        # the force held over each interval: the previous one, the first load before the first
+        self.held = np.maximum(np.concatenate([[first], f[:-1]]), 0.0)
+        self.first_n = first
         t = data.time_s
         self.dt = np.maximum(np.diff(t, prepend=t[:1]), 0.0)
         usable = data.usable & (f > 0)
         self.full_scale = float(np.max(f[usable])) if usable.any() else 1.0
-        self._k: dict[float, FloatArray] = {}
+        steps = self.dt[self.dt > 0]
+        self.tau_low_s = TAU_MIN_STEPS * float(np.median(steps)) if steps.size else 0.0
+        self.tau_high_s = 0.5 * float(t[-1] - t[0]) if t.size else 0.0
+        self._k: dict[tuple[float, float], FloatArray] = {}
         self._s: dict[float, FloatArray] = {}
         self.reading = self.force  # the curve's reading x the play follows (set per curve)
+
+    def resolved(self, tau_s: float) -> bool:
+        return self.tau_low_s <= tau_s <= self.tau_high_s
 
     def read_with(self, x_hat: FloatArray) -> None:
         """Drive the hysteresis regressors by this curve's reading."""
         self.reading = x_hat
         self._s.clear()
 
-    def kelvin(self, tau_s: float) -> FloatArray:
-        if tau_s not in self._k:
-            self._k[tau_s] = kelvin_response(self.held, self.dt, tau_s)
-        return self._k[tau_s]
+    def kelvin(self, tau_s: float, recovery_tau_s: float | None = None) -> FloatArray:
+        key = (tau_s, tau_s if recovery_tau_s is None else recovery_tau_s)
+        if key not in self._k:
+            self._k[key] = kelvin_unit_series(self.held, self.dt, key[0], key[1], self.first_n)
+        return self._k[key]
 
     def hysteresis(self, width_n: float) -> FloatArray:
         if width_n not in self._s:
-            self._s[width_n] = self.force * preisach_direction(self.reading, width_n)
+            self._s[width_n] = self.force * play_direction_series(self.reading, width_n)
         return self._s[width_n]
 
 
@@ -225,63 +220,92 @@ def reading_noise_n(x_hat: FloatArray, force_n: FloatArray, rows: BoolArray) -> 
 #: The narrowest play (``PLAY_SHARES``) must be this many reading-noise sigmas wide: a narrower
 #: one turns between its branches on noise, and the force jumps by beta F / len(PLAY_SHARES).
 PLAY_NOISE_SIGMAS = 2.0
+#: (tau1, tau2, width, recovery factor): one point of a drift form's grid.
+GridPoint = tuple[float, float, float, float]
 
 
-def _grid(form: str, full_scale: float, noise_n: float = 0.0) -> list[tuple[float, float, float]]:
-    """(tau1, tau2, width) triples to try for a drift form (unused values at their defaults)."""
+def _grid(reg: _Regressors, form: str, noise_n: float = 0.0) -> list[GridPoint]:
+    """The grid points to try for a drift form (unused values at their defaults); only time
+    constants the record resolves (``_Regressors.resolved``)."""
     elements, hyst = DRIFT_FORMS[form]
     d = Drift()
-    tau1s = TAU1_GRID_S if elements >= 1 else (d.creep_tau_s,)
-    tau2s = TAU2_GRID_S if elements >= 2 else (d.creep2_tau_s,)
+    tau1s = tuple(t for t in TAU1_GRID_S if reg.resolved(t)) if elements >= 1 else (d.creep_tau_s,)
+    tau2s = tuple(t for t in TAU2_GRID_S if reg.resolved(t)) if elements >= 2 else (d.creep2_tau_s,)
+    factors = RECOVERY_FACTORS if elements else (1.0,)
     widths: tuple[float, ...] = (d.hysteresis_width_n,)
     if hyst:
         narrowest = min(PLAY_SHARES)
-        wide = [
-            w * full_scale for w in WIDTH_GRID_FS if narrowest * w * full_scale >= PLAY_NOISE_SIGMAS * noise_n
-        ]
-        widths = tuple(wide) or (max(WIDTH_GRID_FS) * full_scale,)
-    return [(t1, t2, w) for t1 in tau1s for t2 in tau2s for w in widths if elements < 2 or t2 >= 3 * t1]
+        fs = reg.full_scale
+        wide = [w * fs for w in WIDTH_GRID_FS if narrowest * w * fs >= PLAY_NOISE_SIGMAS * noise_n]
+        widths = tuple(wide) or (max(WIDTH_GRID_FS) * fs,)
+    return [
+        (t1, t2, w, r)
+        for t1 in tau1s
+        for t2 in tau2s
+        for w in widths
+        for r in factors
+        if elements < 2 or t2 >= 3 * t1
+    ]
+
+
+def _drift_at(form: str, grid: GridPoint, values: Sequence[float]) -> Drift:
+    """The drift of ``form`` at a grid point with fractions ``values`` (a1, a2, beta as used);
+    a form's own terms stay on (a fitted zero would make it another form)."""
+    elements, hyst = DRIFT_FORMS[form]
+    tau1, tau2, width, factor = grid
+    vals = list(values)
+    a1 = max(vals.pop(0), 1e-9) if elements >= 1 else 0.0
+    a2 = max(vals.pop(0), 1e-9) if elements >= 2 else 0.0
+    beta = max(vals.pop(0), 1e-9) if hyst else 0.0
+    rec1 = tau1 * factor if elements >= 1 and factor != 1.0 else None
+    rec2 = tau2 * factor if elements >= 2 and factor != 1.0 else None
+    return Drift(min(a1, 5.0), tau1, min(a2, 5.0), tau2, min(beta, 0.9), width, rec1, rec2)
+
+
+def _columns(reg: _Regressors, form: str, grid: GridPoint) -> list[FloatArray]:
+    elements, hyst = DRIFT_FORMS[form]
+    tau1, tau2, width, factor = grid
+    cols: list[FloatArray] = []
+    if elements >= 1:
+        cols.append(reg.kelvin(tau1, tau1 * factor))
+    if elements >= 2:
+        cols.append(reg.kelvin(tau2, tau2 * factor))
+    if hyst:
+        cols.append(reg.hysteresis(width))
+    return cols
 
 
 def _fractions(
-    reg: _Regressors, form: str, grid: tuple[float, float, float], x_hat: FloatArray, rows: BoolArray
+    reg: _Regressors, form: str, grid: GridPoint, x_hat: FloatArray, rows: BoolArray
 ) -> tuple[Drift, float]:
-    """The linear least-squares fractions (a1, a2, beta) at one grid point, and the training
-    residual RMS (N) of x_hat - x(F)."""
-    elements, hyst = DRIFT_FORMS[form]
-    tau1, tau2, width = grid
-    cols: list[FloatArray] = []
-    if elements >= 1:
-        cols.append(reg.kelvin(tau1))
-    if elements >= 2:
-        cols.append(reg.kelvin(tau2))
-    if hyst:
-        cols.append(reg.hysteresis(width))
+    """The non-negative least-squares fractions (a1, a2, beta) at one grid point, and the
+    training residual RMS (N) of x_hat - x(F)."""
+    cols = _columns(reg, form, grid)
     y = (x_hat - reg.force)[rows]
     ok = np.isfinite(y)
     values = [0.0] * len(cols)
     if cols and ok.sum() > len(cols):
         a = np.column_stack([c[rows][ok] for c in cols])
-        values = [float(v) for v in np.nan_to_num(np.linalg.lstsq(a, y[ok], rcond=None)[0])]
-    a1 = float(np.clip(values.pop(0), -0.9, 5.0)) if elements >= 1 else 0.0
-    a2 = float(np.clip(values.pop(0), -0.9, 5.0)) if elements >= 2 else 0.0
-    beta = float(np.clip(values.pop(0), -0.9, 0.9)) if hyst else 0.0
-    # a form's own terms stay on (a fitted zero would make it another form)
-    a1 = a1 if elements < 1 or a1 != 0.0 else 1e-9
-    a2 = a2 if elements < 2 or a2 != 0.0 else 1e-9
-    beta = beta if not hyst or beta != 0.0 else 1e-9
-    drift = Drift(a1, tau1, a2, tau2, beta, width)
+        ok_cols = np.all(np.isfinite(a), axis=0)
+        if ok_cols.all():
+            values = [float(v) for v in nnls(a, y[ok])[0]]
+    drift = _drift_at(form, grid, values)
     resid = y - _design(reg, drift)[rows]
     return drift, rms(resid)
+
+
+def _grid_point(d: Drift) -> GridPoint:
+    factor = d.recovery_tau1_s / d.creep_tau_s if d.creep_fraction else d.recovery_tau2_s / d.creep2_tau_s
+    return (d.creep_tau_s, d.creep2_tau_s, d.hysteresis_width_n, factor)
 
 
 def _design(reg: _Regressors, d: Drift) -> FloatArray:
     """x(F) - F: the drift terms the reference force drives."""
     out = np.zeros_like(reg.force)
     if d.creep_fraction:
-        out = out + d.creep_fraction * reg.kelvin(d.creep_tau_s)
+        out = out + d.creep_fraction * reg.kelvin(d.creep_tau_s, d.recovery_tau1_s)
     if d.creep2_fraction:
-        out = out + d.creep2_fraction * reg.kelvin(d.creep2_tau_s)
+        out = out + d.creep2_fraction * reg.kelvin(d.creep2_tau_s, d.recovery_tau2_s)
     if d.hysteresis_fraction:
         out = out + d.hysteresis_fraction * reg.hysteresis(d.hysteresis_width_n)
     return out
@@ -299,41 +323,46 @@ def fit_candidate(reg: _Regressors, kind: str, form: str, nested: CurveChannel |
     curve = fit_curve(kind, np.where(rows, reg.force, np.nan), r)
     drift = Drift()
     if form != "static":
-        x_hat = CurveChannel(curve).static_force(r)
+        x_hat = _reading(curve, r)
         reg.read_with(x_hat)
+        grid_points = _grid(reg, form, reading_noise_n(x_hat, reg.force, rows))
+        if not grid_points:
+            raise ValueError(f"the record resolves no time constant of {form}")
         best = min(
-            (
-                _fractions(reg, form, g, x_hat, rows)
-                for g in _grid(form, reg.full_scale, reading_noise_n(x_hat, reg.force, rows))
-            ),
+            (_fractions(reg, form, g, x_hat, rows) for g in grid_points),
             key=lambda pair: pair[1] if math.isfinite(pair[1]) else math.inf,
         )
         drift = best[0]
-        grid = (drift.creep_tau_s, drift.creep2_tau_s, drift.hysteresis_width_n)
+        grid = _grid_point(drift)
         for _ in range(ALTERNATIONS):
             target = reg.force + _design(reg, drift)
             curve = fit_curve(kind, np.where(rows, target, np.nan), r)
-            x_hat = CurveChannel(curve).static_force(r)
+            x_hat = _reading(curve, r)
             reg.read_with(x_hat)
             drift = _fractions(reg, form, grid, x_hat, rows)[0]
         curve, drift = _refine(reg, form, curve, drift, rows)
         if nested is not None and DRIFT_FORMS[form][0] == 2:
             n = nested.drift
-            start = Drift(
-                n.creep_fraction, n.creep_tau_s, 0.01, max(4.0 * n.creep_tau_s, 60.0),
-                n.hysteresis_fraction, n.hysteresis_width_n,
-            )  # fmt: skip
-            here = _training_rms(reg, curve, drift, rows)
-            reg.read_with(CurveChannel(nested.curve).static_force(r))
-            other = _refine(reg, form, nested.curve, start, rows)
-            if _training_rms(reg, *other, rows) < here:
-                curve, drift = other
-    return CurveChannel(curve, drift, force_min_n=0.0, force_max_n=reg.full_scale)
+            slow = max(4.0 * n.creep_tau_s, 60.0)
+            if reg.resolved(slow):
+                start = replace(
+                    n, creep2_fraction=0.01, creep2_tau_s=slow,
+                    creep2_recovery_tau_s=None if n.creep_recovery_tau_s is None
+                    else slow * n.recovery_tau1_s / n.creep_tau_s,
+                )  # fmt: skip
+                here = _training_rms(reg, curve, drift, rows)
+                reg.read_with(_reading(nested.curve, r))
+                other = _refine(reg, form, nested.curve, start, rows)
+                if _training_rms(reg, *other, rows) < here:
+                    curve, drift = other
+    floor = curve.force_at_zero_conductance_n
+    low_n = LINE_ZERO_MARGIN * floor if floor > 0.0 else 0.0
+    return CurveChannel(curve, drift, force_min_n=low_n).with_range(0.0, reg.full_scale)
 
 
 def _training_rms(reg: _Regressors, curve: StaticCurve, drift: Drift, rows: BoolArray) -> float:
     """The reference-driven residual x_hat - x(F) on the training rows (N)."""
-    x_hat = CurveChannel(curve).static_force(reg.data.resistance_ohm)
+    x_hat = _reading(curve, reg.data.resistance_ohm)
     reg.read_with(x_hat)
     return rms((x_hat - reg.force - _design(reg, drift))[rows])
 
@@ -343,7 +372,8 @@ def _refine(
 ) -> tuple[StaticCurve, Drift]:
     """Step 4 (module docstring): a power law's or a line's two parameters and the fractions
     by one least-squares problem in force on the training rows, started from ``curve`` and
-    ``drift``; both unchanged for a lookup or if it fails."""
+    ``drift`` (fractions >= 0); a symmetric element's time constant is refined too (in ln tau,
+    within what the record resolves). Both unchanged for a lookup or if it fails."""
     elements, hyst = DRIFT_FORMS[form]
     d = drift
     r = reg.data.resistance_ohm
@@ -367,17 +397,33 @@ def _refine(
         p0 = [g0 / curve.slope_s_per_n, -curve.intercept_s / curve.slope_s_per_n]
         low, high = [0.0, -np.inf], [np.inf, np.inf]
     taus = [d.creep_tau_s, d.creep2_tau_s][:elements]
+    recs = [d.recovery_tau1_s, d.recovery_tau2_s][:elements]
+    # a symmetric element's time constant is refined (ln tau, within what the record resolves)
+    free = [i for i in range(elements) if taus[i] == recs[i]] if not d.asymmetric else []
     fractions = [d.creep_fraction, d.creep2_fraction][:elements]
-    # the time constants are refined too (ln tau, within the grid's span and a bit beyond)
-    p0 += fractions + [math.log(t) for t in taus] + [d.hysteresis_fraction] * hyst
-    low += [-0.9] * elements + [math.log(0.3), math.log(3.0)][:elements] + [-0.9] * hyst
-    high += [5.0] * elements + [math.log(300.0), math.log(5000.0)][:elements] + [0.9] * hyst
+    lo_tau, hi_tau = math.log(max(reg.tau_low_s, 1e-3)), math.log(max(reg.tau_high_s, 2e-3))
+    p0 += fractions + [math.log(taus[i]) for i in free] + [d.hysteresis_fraction] * hyst
+    low += [0.0] * elements + [lo_tau] * len(free) + [0.0] * hyst
+    high += [5.0] * elements + [hi_tau] * len(free) + [0.9] * hyst
     lg = np.log(g)
+    fixed_cols = {i: reg.kelvin(taus[i], recs[i])[ok] for i in range(elements) if i not in free}
+
+    def element_taus(p: FloatArray) -> list[float]:
+        out = list(taus)
+        for j, i in enumerate(free):
+            out[i] = math.exp(p[2 + elements + j])
+        return out
 
     def drift_terms(p: FloatArray) -> FloatArray:
         out = np.zeros(f.size)
+        tau_now = element_taus(p)
         for i in range(elements):
-            out = out + p[2 + i] * kelvin_response(reg.held, reg.dt, math.exp(p[2 + elements + i]))[ok]
+            col = (
+                fixed_cols[i]
+                if i in fixed_cols
+                else kelvin_unit_series(reg.held, reg.dt, tau_now[i], tau_now[i], reg.first_n)[ok]
+            )
+            out = out + p[2 + i] * col
         if hyst_col is not None:
             out = out + p[-1] * hyst_col[ok]
         return out
@@ -387,75 +433,63 @@ def _refine(
         return np.asarray(x - f - drift_terms(p))
 
     bounds = (np.array(low), np.array(high))
-    sol = least_squares(resid, np.clip(np.array(p0), *bounds), bounds=bounds, x_scale="jac")
+    start = np.clip(np.array(p0), *bounds)
+    sol = least_squares(resid, start, bounds=bounds, x_scale="jac")
     p = [float(v) for v in sol.x]
     if not sol.success or not all(math.isfinite(v) for v in p) or not (power or p[0] > 0.0):
         return curve, drift
-    if rms(resid(sol.x)) > rms(resid(np.clip(np.array(p0), *bounds))):
+    if rms(resid(sol.x)) > rms(resid(start)):
         return curve, drift
     a = p[2 : 2 + elements] + [0.0] * (2 - elements)
-    t = [math.exp(v) for v in p[2 + elements : 2 + 2 * elements]] + taus[
-        len(p[2 + elements : 2 + 2 * elements]) :
-    ]
+    t = element_taus(sol.x) + [d.creep2_tau_s] * (2 - elements)
+    rec = [t[i] if i in free else recs[i] for i in range(elements)] + [d.recovery_tau2_s] * (2 - elements)
     tau1 = t[0] if elements >= 1 else d.creep_tau_s
     tau2 = t[1] if elements >= 2 else d.creep2_tau_s
+    rec1, rec2 = rec[0], rec[1]
     if elements >= 2 and tau2 < tau1:  # keep the faster element first
-        a[0], a[1], tau1, tau2 = a[1], a[0], tau2, tau1
+        a[0], a[1], tau1, tau2, rec1, rec2 = a[1], a[0], tau2, tau1, rec2, rec1
     beta = p[-1] if hyst else 0.0
     # a form's own terms stay on (a fitted zero would make it another form)
-    a1 = a[0] if elements < 1 or a[0] != 0.0 else 1e-9
-    a2 = a[1] if elements < 2 or a[1] != 0.0 else 1e-9
-    beta = beta if not hyst or beta != 0.0 else 1e-9
-    out = Drift(a1, tau1, a2, tau2, beta, d.hysteresis_width_n)
+    a1 = max(a[0], 1e-9) if elements >= 1 else 0.0
+    a2 = max(a[1], 1e-9) if elements >= 2 else 0.0
+    beta = max(beta, 1e-9) if hyst else 0.0
+    out = Drift(
+        a1, tau1, a2, tau2, beta, d.hysteresis_width_n,
+        rec1 if elements >= 1 and rec1 != tau1 else None,
+        rec2 if elements >= 2 and rec2 != tau2 else None,
+    )  # fmt: skip
     if power:
         return PowerLawCurve(g0 * math.exp(p[0]), p[1]), out
     return LineCurve(g0 / p[0], -p[1] / p[0] * g0), out
 
 
-def hold_drift_pct(
-    time_s: FloatArray,
-    reference_n: FloatArray,
+def held_out_drift(
+    data: FitData,
     force_n: FloatArray,
-    rows: BoolArray,
     full_scale: float,
     holds: Sequence[Hold] | None = None,
-) -> float:
-    """RMS over the holds inside ``rows`` of ``hold_change_n``, as % of ``full_scale``; NaN
-    without a hold. ``holds``: the reference's holds when already found (``find_holds``)."""
-    tolerance = hold_tolerance_n(reference_n)
-    changes = []
-    for h in find_holds(time_s, reference_n, tolerance) if holds is None else holds:
-        if not rows[h.start : h.stop].all():
-            continue
-        change = hold_change_n(reference_n, force_n, h, tolerance)
-        if math.isfinite(change):
-            changes.append(change)
-    if not changes or not full_scale > 0:
-        return math.nan
-    return 100.0 * rms(np.asarray(changes)) / full_scale
-
-
-def hold_change_n(reference_n: FloatArray, force_n: FloatArray, hold: Hold, tolerance_n: float) -> float:
-    """How much the error moves across a hold (N): the mean error over the last 10 % of its
-    settled rows (``Hold.settled``) minus the mean over the first 10 %."""
-    h = hold.settled(reference_n, tolerance_n)
-    first, last = h.edges()
-    err = np.asarray(force_n, dtype=np.float64) - np.asarray(reference_n, dtype=np.float64)
-    a, b = float(np.nanmean(err[first])), float(np.nanmean(err[last]))
-    return b - a
+    offset_n: float = 0.0,
+) -> DriftGroups:
+    """The drift of ``force_n`` across the held-out holds (``holds.hold_drifts``, the measure
+    ``apply`` prints), in its two groups, % of ``full_scale``; against F_ref + ``offset_n``."""
+    reference = data.force_n + offset_n
+    found = tuple(holds) if holds is not None else None
+    drifts = hold_drifts(data.time_s, reference, force_n, data.test, found, hold_tolerance_n(data.force_n))
+    return drift_groups_pct(drifts, full_scale)
 
 
 def score(
     data: FitData, name: str, channel: CurveChannel, full_scale: float, holds: Sequence[Hold] | None = None
 ) -> Candidate:
-    """Track the whole record with ``channel`` and score it on the held-out rows."""
+    """Track the whole record with ``channel`` (the runtime's tracker) and score it on the
+    held-out rows."""
     force, _ = track_series(channel, data.resistance_ohm, data.time_s)
     err = force - data.force_n
     return Candidate(
         name=name,
         channel=channel,
         held_out_force_rms_n=rms(err[data.test]),
-        hold_drift_pct_fs=hold_drift_pct(data.time_s, data.force_n, force, data.test, full_scale, holds),
+        drift=held_out_drift(data, force, full_scale, holds),
         train_force_rms_n=rms(err[data.train]),
         force_n=force,
     )
@@ -466,9 +500,11 @@ def rank_candidates(
     kinds: Sequence[str] = CURVE_KINDS,
     forms: Sequence[str] | None = None,
     real_time: bool = True,
+    range_n: tuple[float, float] | None = None,
 ) -> list[Candidate]:
     """Every curve kind with every drift form (time-driven forms only with real time), fitted
-    and scored; best held-out force RMS first. A candidate that cannot be fitted is left out."""
+    and scored as written: calibrated over ``range_n`` (N; default: the fitted record's loaded
+    range). Best held-out force RMS first. A candidate that cannot be fitted is left out."""
     reg = _Regressors(data)
     chosen = list(forms) if forms is not None else list(DRIFT_FORMS)
     if not real_time:
@@ -484,6 +520,8 @@ def rank_candidates(
             except (ValueError, np.linalg.LinAlgError):
                 continue
             fitted[(kind, form)] = ch
+            if range_n is not None:
+                ch = ch.with_range(*range_n)
             out.append(score(data, f"{kind} + {form}", ch, reg.full_scale, holds))
     return sorted(
         out, key=lambda c: c.held_out_force_rms_n if math.isfinite(c.held_out_force_rms_n) else math.inf

@@ -11,6 +11,13 @@ hold, which it is to within the tolerance.
 
 ``Hold.edges`` gives the first and the last 10 % of a hold's rows (at least one row each):
 where creep drift shows as the difference between the start and the end of a hold.
+
+``hold_drifts`` is the one per-hold measure of a force read against the reference, used by
+``apply``'s report and ``calibrate``'s ranking alike: per hold, its settled rows (``Hold.settled``)
+within the rows measured, the mean error over their first and last 10 %, the change between
+them, and whether the hold comes *right after a higher load* (the reference rose more than
+twice the tolerance above the hold's level since the previous hold began): where a sensor's
+recovery shows. ``drift_groups_pct`` sums them up in the two groups a user feels apart.
 """
 
 from __future__ import annotations
@@ -21,9 +28,20 @@ from dataclasses import dataclass, replace
 from typing import Final
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["EDGE_FRACTION", "HOLD_TOLERANCE_FS", "MIN_HOLD_S", "Hold", "find_holds", "hold_tolerance_n"]
+__all__ = [
+    "EDGE_FRACTION",
+    "HOLD_TOLERANCE_FS",
+    "MIN_HOLD_S",
+    "DriftGroups",
+    "Hold",
+    "HoldDrift",
+    "drift_groups_pct",
+    "find_holds",
+    "hold_drifts",
+    "hold_tolerance_n",
+]
 
 #: The shortest hold, s (first row to last row).
 MIN_HOLD_S: Final = 3.0
@@ -141,3 +159,92 @@ def find_holds(
         else:
             i += 1
     return tuple(holds)
+
+
+@dataclass(frozen=True)
+class HoldDrift:
+    """One hold's error drift (N): the mean error (force - reference) over the first and the
+    last ``EDGE_FRACTION`` of its measured settled rows, and the change between them."""
+
+    hold: Hold
+    after_higher: bool
+    start_error_n: float
+    end_error_n: float
+
+    @property
+    def change_n(self) -> float:
+        return self.end_error_n - self.start_error_n
+
+
+def _mean(values: NDArray[np.float64]) -> float:
+    finite = values[np.isfinite(values)]
+    return float(finite.mean()) if finite.size else math.nan
+
+
+def hold_drifts(
+    time_s: ArrayLike,
+    reference_n: ArrayLike,
+    force_n: ArrayLike,
+    rows: ArrayLike | None = None,
+    holds: tuple[Hold, ...] | None = None,
+    tolerance_n: float | None = None,
+) -> tuple[HoldDrift, ...]:
+    """Every hold's drift (module docstring) measured on ``rows`` (default: all): a hold is
+    cut to its settled rows, then to its longest run of measured rows, which must last
+    ``MIN_HOLD_S``. ``holds``: the reference's holds when already found."""
+    t = np.asarray(time_s, dtype=np.float64)
+    ref = np.asarray(reference_n, dtype=np.float64)
+    err = np.asarray(force_n, dtype=np.float64) - ref
+    measured = np.ones(t.size, dtype=np.bool_) if rows is None else np.asarray(rows, dtype=np.bool_)
+    tol = hold_tolerance_n(ref) if tolerance_n is None else tolerance_n
+    found = find_holds(t, ref, tol) if holds is None else holds
+    out: list[HoldDrift] = []
+    previous_start = 0
+    for h in found:
+        before = ref[previous_start : h.start]
+        before = before[np.isfinite(before)]
+        after_higher = bool(before.size and before.max() > h.level_n + 2.0 * tol)
+        previous_start = h.start
+        s = h.settled(ref, tol)
+        inside = measured[s.start : s.stop]
+        if not inside.any():
+            continue
+        # the longest run of measured rows within the settled hold
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], inside.astype(np.int8), [0]])))
+        starts, stops = edges[::2], edges[1::2]
+        k = int(np.argmax(stops - starts))
+        a, b = s.start + int(starts[k]), s.start + int(stops[k])
+        if t[b - 1] - t[a] < MIN_HOLD_S:
+            continue
+        part = Hold(a, b, float(t[a]), float(t[b - 1]), s.level_n)
+        first, last = part.edges()
+        out.append(HoldDrift(part, after_higher, _mean(err[first]), _mean(err[last])))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class DriftGroups:
+    """The RMS hold drift (% of full scale) of the holds right after a higher load and of the
+    others (NaN: no such hold), and how many holds each has."""
+
+    after_higher_pct_fs: float
+    others_pct_fs: float
+    after_higher_holds: int
+    other_holds: int
+
+    @property
+    def all_pct_fs(self) -> tuple[float, float]:
+        return self.after_higher_pct_fs, self.others_pct_fs
+
+
+def drift_groups_pct(drifts: tuple[HoldDrift, ...], full_scale_n: float) -> DriftGroups:
+    """``drifts`` in two groups: the RMS of their changes, % of ``full_scale_n``."""
+
+    def pct(group: list[float]) -> float:
+        if not group or not full_scale_n > 0:
+            return math.nan
+        return 100.0 * math.sqrt(sum(v * v for v in group) / len(group)) / full_scale_n
+
+    after = [d.change_n for d in drifts if d.after_higher and math.isfinite(d.change_n)]
+    others = [d.change_n for d in drifts if not d.after_higher and math.isfinite(d.change_n)]
+    return DriftGroups(pct(after), pct(others), len(after), len(others))

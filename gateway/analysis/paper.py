@@ -20,7 +20,8 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from ..atomic import atomic_write_text
-from ..model import ConductanceLine, SensorModel, SensorParams
+from ..model import SensorModel, SensorParams
+from ..model.static_curves import LineCurve
 from .plots import save_figure
 from .records import ChannelRecord
 
@@ -61,7 +62,7 @@ class PaperResult:
     e0: LinearLaw
     e1: LinearLaw
     mu1: LinearLaw
-    line: ConductanceLine
+    line: LineCurve
     staircase_force_n: FloatArray
     staircase_resistance_ohm: FloatArray
     fitted: SensorParams
@@ -202,7 +203,7 @@ def analyze(creep: ChannelRecord, staircase: ChannelRecord, true: SensorParams) 
         mu1_pa_s=mu1.intercept,
         mu1_slope_pa_s_per_n=max(mu1.slope, 0.0),
     )
-    return PaperResult(holds, e0, e1, mu1, ConductanceLine.fit(sf, sr), sf, sr, fitted, true)
+    return PaperResult(holds, e0, e1, mu1, LineCurve.fit_conductance(sf, sr), sf, sr, fitted, true)
 
 
 def write_outputs(result: PaperResult, out_dir: Path, source: str) -> list[Path]:

@@ -1,77 +1,33 @@
-"""The physical model's rivals on held-out force: the paper's line and a monotone lookup.
+"""The physical model's static rivals on held-out force: the paper's line and a monotone lookup.
 
-- the paper's conductance line C = m F + n (``gateway.model.ConductanceLine``, eq. 18);
-- ``MonotoneLookup``: force as a non-increasing, piecewise-linear function of ln R through
-  the medians of equal-count bins of the training rows (pool-adjacent-violators makes it
-  monotone), flat beyond the first and last knot.
+- the paper's conductance line C = m F + n (``gateway.model.static_curves.LineCurve``, eq. 18,
+  fitted in conductance), read as a ``[line]`` table reads it;
+- a monotone lookup (``LookupCurve.fit``), read as a ``[lookup]`` table reads it: linear in
+  ln R between its knots and along its end segments beyond them.
 
-Both are fitted on the training rows and judged on the same held-out rows as the model, so
-every report can say plainly which calibration reads force best.
+Both are fitted on the training rows and read on every row by the runtime's own tracker
+(``gateway.model.tracker.track_series``, the function ``apply`` and the gateway read a written
+table with), so the figure ranked is the figure a user gets; every report can say plainly
+which calibration reads force best.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from ..model import ConductanceLine
+from ..model.calibrated import LINE_ZERO_MARGIN, CurveChannel, channel_from_table, line_channel
+from ..model.static_curves import LineCurve, LookupCurve
+from ..model.tracker import track_series
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-LOOKUP_KNOTS = 24
-
-
-@dataclass(frozen=True)
-class MonotoneLookup:
-    """F(ln R), non-increasing: ``log_r`` increasing knots, ``force_n`` at each knot."""
-
-    log_r: tuple[float, ...]
-    force_n: tuple[float, ...]
-
-    def force(self, resistance_ohm: ArrayLike) -> FloatArray:
-        r = np.asarray(resistance_ohm, dtype=np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lr = np.log(r)
-        out = np.interp(np.where(np.isfinite(lr), lr, self.log_r[-1]), self.log_r, self.force_n)
-        return np.asarray(out)
-
-    @classmethod
-    def fit(cls, force_n: ArrayLike, resistance_ohm: ArrayLike, knots: int = LOOKUP_KNOTS) -> MonotoneLookup:
-        f = np.asarray(force_n, dtype=np.float64).ravel()
-        r = np.asarray(resistance_ohm, dtype=np.float64).ravel()
-        ok = np.isfinite(f) & np.isfinite(r) & (r > 0)
-        if np.count_nonzero(ok) < 4:
-            raise ValueError("a lookup needs at least four rows with a finite resistance")
-        lr, f = np.log(r[ok]), f[ok]
-        order = np.argsort(lr, kind="stable")
-        lr, f = lr[order], f[order]
-        groups = np.array_split(np.arange(lr.size), min(knots, lr.size // 2))
-        xs = [float(np.median(lr[g])) for g in groups]
-        ys = [float(np.median(f[g])) for g in groups]
-        ws = [float(g.size) for g in groups]
-        xs_out, ys_out = _pav_non_increasing(xs, ys, ws)
-        return cls(tuple(xs_out), tuple(ys_out))
-
-
-def _pav_non_increasing(xs: list[float], ys: list[float], ws: list[float]) -> tuple[list[float], list[float]]:
-    """Pool adjacent violators so that y does not increase with x (x pooled the same way)."""
-    blocks: list[list[float]] = []  # [sum w x, sum w y, sum w]
-    for x, y, w in zip(xs, ys, ws, strict=True):
-        blocks.append([w * x, w * y, w])
-        while len(blocks) > 1 and blocks[-1][1] / blocks[-1][2] > blocks[-2][1] / blocks[-2][2]:
-            last = blocks.pop()
-            for k in range(3):
-                blocks[-1][k] += last[k]
-    bx = [b[0] / b[2] for b in blocks]
-    by = [b[1] / b[2] for b in blocks]
-    if len(bx) == 1:
-        bx, by = [bx[0] - 1e-6, bx[0] + 1e-6], [by[0], by[0]]
-    return bx, by
+__all__ = ["LINE_ZERO_MARGIN", "Rivals", "force_rms", "line_range_lines", "verdict"]
 
 
 def force_rms(predicted: FloatArray, reference: FloatArray) -> float:
@@ -83,47 +39,68 @@ def force_rms(predicted: FloatArray, reference: FloatArray) -> float:
 
 @dataclass(frozen=True)
 class Rivals:
-    """The line and the lookup, fitted on the training rows, scored on the held-out rows."""
+    """The line and the lookup as written (``CurveChannel``), fitted on the training rows, read
+    on every row by the runtime's tracker and scored on the held-out rows."""
 
-    line: ConductanceLine
+    line: CurveChannel
     line_force_rms_n: float
-    lookup: MonotoneLookup
+    lookup: CurveChannel
     lookup_force_rms_n: float
+    line_force_n: FloatArray = field(repr=False)
+    lookup_force_n: FloatArray = field(repr=False)
 
     @classmethod
     def fit(
-        cls, force_n: FloatArray, resistance_ohm: FloatArray, train: BoolArray, test: BoolArray
+        cls,
+        force_n: FloatArray,
+        resistance_ohm: FloatArray,
+        train: BoolArray,
+        test: BoolArray,
+        range_n: tuple[float, float] | None = None,
     ) -> Rivals:
-        line = ConductanceLine.fit(force_n[train], resistance_ohm[train])
-        lookup = MonotoneLookup.fit(force_n[train], resistance_ohm[train])
-        r_test, f_test = resistance_ohm[test], force_n[test]
+        """Fit both on ``train`` and score them on ``test``; ``range_n``: the line's calibrated
+        range as written (default: the training rows' loaded range)."""
+        line = LineCurve.fit_conductance(force_n[train], resistance_ohm[train])
+        lookup = LookupCurve.fit(force_n[train], resistance_ohm[train])
+        if range_n is None:
+            loaded = force_n[train & np.isfinite(force_n) & (force_n > 0)]
+            range_n = (float(loaded.min()), float(loaded.max())) if loaded.size else (0.01, 1.0)
+        line_ch = line_channel(line, *range_n)
+        lookup_ch = channel_from_table("lookup", lookup.table(), 0.0, 0.0)
+        no_time = np.zeros(resistance_ohm.size)  # static: no state, time is not read
+        line_f, _ = track_series(line_ch, resistance_ohm, no_time)
+        lookup_f, _ = track_series(lookup_ch, resistance_ohm, no_time)
         return cls(
-            line=line,
-            line_force_rms_n=force_rms(line.force(r_test), f_test),
-            lookup=lookup,
-            lookup_force_rms_n=force_rms(lookup.force(r_test), f_test),
+            line=line_ch,
+            line_force_rms_n=force_rms(line_f[test], force_n[test]),
+            lookup=lookup_ch,
+            lookup_force_rms_n=force_rms(lookup_f[test], force_n[test]),
+            line_force_n=line_f,
+            lookup_force_n=lookup_f,
         )
+
+    @property
+    def line_curve(self) -> LineCurve:
+        curve = self.line.curve
+        assert isinstance(curve, LineCurve)
+        return curve
 
     def force_noise_floor_n(self, sigma_log: FloatArray, resistance_ohm: FloatArray) -> float:
         """The force RMS the log-R noise alone causes, through the line: |dF/d ln R| = C / m."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            dfd = 1.0 / (resistance_ohm * abs(self.line.slope_s_per_n))
+            dfd = 1.0 / (resistance_ohm * abs(self.line_curve.slope_s_per_n))
         e = sigma_log * dfd
         e = e[np.isfinite(e)]
         return float(np.sqrt(np.mean(e * e))) if e.size else math.nan
 
 
-#: A line with n < 0 starts this factor above its zero-conductance force -n/m.
-LINE_ZERO_MARGIN = 1.1
-
-
-def line_range_lines(line: ConductanceLine, record_min_n: float) -> list[str]:
+def line_range_lines(line: LineCurve, record_min_n: float) -> list[str]:
     """The ``[line]`` table's own ``force_min_n`` when the channel's (the record's lowest
     force) lies at or below 1.1 x the line's zero-conductance force -n/m (n < 0): below -n/m
-    a sensor at rest would read a force (``gateway.model.conversion.LineConversion``)."""
+    a sensor at rest would read a force (``gateway.model.calibrated.CurveChannel``)."""
     if line.intercept_s >= 0.0:
         return []
-    floor_n = LINE_ZERO_MARGIN * float(line.force(math.inf))  # an open sensor reads -n/m
+    floor_n = LINE_ZERO_MARGIN * line.force_at_zero_conductance_n
     if record_min_n > floor_n:
         return []
     return [

@@ -17,7 +17,7 @@ from typing import Final
 from ..errors import ConfigError
 from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, MAX_READ_REGISTERS, DeviceChecks, RegisterMap
 from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
-from ..model.conversion import Conversion, LineConversion, LookupConversion
+from ..model.conversion import Conversion
 from ..model.curves import CurveChannel, Drift
 from ..model.params import Interval
 from .layout import GridLayout
@@ -40,8 +40,6 @@ __all__ = [
     "ChannelConfig",
     "DeviceConfig",
     "GatewayConfig",
-    "LineConversion",
-    "LookupConversion",
     "MetricsConfig",
     "RegisterMap",
     "TlsConfig",
@@ -198,11 +196,9 @@ class ChannelConfig:
                     f"{where}: calibrated_range_n: {self.calibrated_range_n!r} is out of range; "
                     "allowed: 0 <= low < high <= inf N"
                 )
-        if self.conversion is not None and not isinstance(
-            self.conversion, LineConversion | LookupConversion | CurveChannel
-        ):
+        if self.conversion is not None and not isinstance(self.conversion, CurveChannel):
             raise ConfigError(
-                f"{where}: conversion: expected None, LineConversion, LookupConversion or CurveChannel, "
+                f"{where}: conversion: expected None or a CurveChannel, "
                 f"got {type(self.conversion).__name__}"
             )
 

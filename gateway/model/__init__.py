@@ -20,7 +20,6 @@ plus the further effects named in ``docs/record-format.md``.
 * ``divider``: the paper's conductance line (and ``Divider`` re-exported).
 """
 
-from .divider import ConductanceLine
 from .effects import (
     EFFECT_DESCRIPTIONS,
     EFFECT_NAMES,
@@ -54,7 +53,6 @@ __all__ = [
     "FRONT_END_KINDS",
     "PAPER_EFFECTS",
     "ChannelParams",
-    "ConductanceLine",
     "Divider",
     "DividerStatus",
     "ForceStatus",

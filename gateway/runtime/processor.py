@@ -47,10 +47,10 @@ from ..config import ChannelConfig, DeviceConfig
 from ..errors import DecodeError
 from ..modbus.image import RawSample
 from ..model import ModelState, SensorModel
-from ..model.conversion import ConversionSet
 from ..model.curves import CurveChannel, CurveSet, CurveState, Drift, LineCurve
 from .baseline import BaselineCorrection
 from .clock import NO_CLOCK_HISTORY, ClockHealth, time_step
+from .converters import Converter, CurveConverter, PhysicsConverter, Step
 from .snapshot import (
     VALUED,
     DeviceSnapshot,
@@ -163,16 +163,6 @@ class DeviceProcessor:
         self.y_mm = np.array([c.y_mm for c in chans], dtype=np.float64)
         for a in (self.index, self.x_mm, self.y_mm):
             a.setflags(write=False)
-        # channels with a line or lookup are read with it, outside the physical model's groups
-        converted = any(
-            c.conversion is not None and not isinstance(c.conversion, CurveChannel) for c in chans
-        )
-        self.conversions = ConversionSet([c.conversion for c in chans]) if converted else None
-        curves = [(k, c.conversion) for k, c in enumerate(chans) if isinstance(c.conversion, CurveChannel)]
-        self.curves = CurveSet([c for _, c in curves], [k for k, _ in curves]) if curves else None
-        self._curve_keys = tuple(
-            channel_key(device, chans[k]) for k in (() if self.curves is None else self.curves.positions)
-        )
         # the calibrated force range of each channel that has one (else 0 N to inf: none)
         ranged = [c.calibrated_range_n for c in chans]
         self._calibrated: tuple[FloatArray, FloatArray] | None = None
@@ -181,26 +171,38 @@ class DeviceProcessor:
                 frozen_copy(np.array([0.0 if r is None else r[0] for r in ranged], dtype=np.float64)),
                 frozen_copy(np.array([np.inf if r is None else r[1] for r in ranged], dtype=np.float64)),
             )
-        # a device that reports its own calibrated force or pressure: every channel is read
-        # from it, with our drift correction on top when the configuration gives one
-        self.output: CurveSet | None = None
-        if device.encoding == "output":
+        # every channel is read by one converter (``converters``): a device that reports its own
+        # calibrated force or pressure through the identity curve (our drift correction on top
+        # when the configuration gives one), a channel with a calibration table through its
+        # curve, the others by the physical model, one group per effect set
+        self.output = device.encoding == "output"
+        if self.output:
             identity = CurveChannel(LineCurve(1.0, 0.0), device.output_drift or Drift())
-            self.output = CurveSet([identity] * len(chans))
-            self.conversions = self.curves = None
-            self._curve_keys = tuple(channel_key(device, c) for c in chans)
+            curves = [(k, identity) for k in range(len(chans))]
+        else:
+            curves = [(k, c.conversion) for k, c in enumerate(chans) if c.conversion is not None]
+        self.curves = CurveSet([c for _, c in curves], [k for k, _ in curves]) if curves else None
+        self._curve_keys = tuple(
+            channel_key(device, chans[k]) for k in (() if self.curves is None else self.curves.positions)
+        )
         by_effects: dict[tuple[str, ...], list[int]] = {}
         for k, c in enumerate(chans):
-            if c.conversion is None and self.output is None:
+            if c.conversion is None and not self.output:
                 by_effects.setdefault(tuple(c.effects), []).append(k)
         self.groups: tuple[tuple[NDArray[np.intp], SensorModel], ...] = tuple(
             (np.array(ks, dtype=np.intp), SensorModel(effects, [chans[k].params for k in ks]))
             for effects, ks in by_effects.items()
         )
+        everyone = np.arange(len(chans))
+        self.converters: tuple[Converter, ...] = tuple(
+            PhysicsConverter(ks, model, bool(np.array_equal(ks, everyone))) for ks, model in self.groups
+        ) + (() if self.curves is None else (CurveConverter(self.curves, from_output=self.output),))
         self.keys = tuple(channel_key(device, c) for c in chans)
-        self._single_group = len(self.groups) == 1 and bool(
-            np.array_equal(self.groups[0][0], np.arange(len(chans)))
-        )
+        # the force each channel reads at the short rail (saturated), from its converter
+        top = np.full(len(chans), np.nan)
+        for conv in self.converters:
+            top[conv.positions] = conv.top_n()
+        self._top_n = frozen_copy(top)
         # the enabled channels as a slice when they are all of them, in order (no copy)
         every = np.array_equal(self.index, np.arange(device.n_channels))
         self._pick: slice | NDArray[np.int64] = slice(None) if every else self.index
@@ -209,10 +211,8 @@ class DeviceProcessor:
         for ks, model in self.groups:
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
                 r0[ks] = model.resistance(np.zeros(len(ks)))
-        if self.conversions is not None:  # a line's or lookup's unloaded end (its lower force bound)
-            r0[self.conversions.positions] = self.conversions.unloaded_ohm
-        if self.curves is not None:  # a curve reads no load on an open sensor
-            r0[self.curves.positions] = np.inf
+        if self.curves is not None:  # where a calibrated channel reads 0 N
+            r0[self.curves.positions] = [c.unloaded_resistance_ohm for c in self.curves.channels]
         self._baseline = BaselineCorrection.of([c.baseline_ohm for c in chans], r0)
         # ADC channels without a zero (no baseline, nothing but default parameters): a force
         # read at the converter's idle floor may be the board's offset, and reads NO_ZERO
@@ -233,7 +233,14 @@ class DeviceProcessor:
         return self.device.name
 
     def initial_state(self) -> DeviceState:
+        """The state of a device whose load history is not known: the physical model starts
+        relaxed, a calibrated channel from the equilibrium at its first sample's load."""
         return DeviceState(ModelState.zeros(len(self.channels)))
+
+    def rested_state(self) -> DeviceState:
+        """The state of a device known to have been unloaded long enough to settle."""
+        curves = None if self.curves is None else self.curves.rested_state()
+        return DeviceState(ModelState.zeros(len(self.channels)), curve_state=curves)
 
     def carry_state(self, old: DeviceProcessor, state: DeviceState) -> DeviceState:
         """State for this (new) configuration from an old one: channels whose device,
@@ -352,65 +359,46 @@ class DeviceProcessor:
     def track(
         self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
     ) -> TrackedSample:
-        """First step of ``process``: resistances and drift-corrected forces."""
-        if self.output is not None:
-            return self._track_output(state, raw, wall_time_s, host_time_s)
+        """First step of ``process``: resistances and drift-corrected forces.
+
+        The rails are read once, here, before any converter: without fault bitmaps a rail is
+        the channel's base status (open, short); with them the open rail is no current at rest
+        (+inf ohm: no contact) and the short rail less resistance than the converter resolves,
+        which reads saturated at the channel's top, without a sample for its state."""
         n = len(self.channels)
-        r_out, r_model, base = self._resistance(raw)
-        r_model = self._tare(r_model)
         dt, now, use_device, clock_health = self._dt(state, raw, host_time_s)
-        usable = base == _CHANNEL_OK
-        if not usable.all():
-            r_model = np.where(usable, r_model, np.nan)
-        ms = state.model_state
         temperature = None if raw.temperature_c is None else raw.temperature_c[self._pick]
-        if self._single_group:
-            model = self.groups[0][1]
-            temp = temperature if model.has("temperature") else None
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                inv, new_state_model = model.track(r_model, ms, dt, temp)
-            force, model_status = inv.force_n, inv.status
+        apparent = None
+        if self.output:
+            apparent = self._output_force(raw)
+            bad = ~np.isfinite(apparent)
+            base = np.where(bad, np.int8(_CHANNEL_ERROR), np.int8(_CHANNEL_OK)).astype(np.int8)
+            apparent = np.where(bad, np.nan, apparent)
+            r_out = r_model = np.full(n, np.nan)
+            short = None
         else:
-            force = np.full(n, np.nan)
-            model_status = np.full(n, _FORCE_INVALID, dtype=np.int8)
-            new = state_arrays(ms)
-            for idx, model in self.groups:
-                temp = temperature[idx] if temperature is not None and model.has("temperature") else None
-                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                    inv, gstate = model.track(r_model[idx], ms.select(idx), dt, temp)
-                force[idx] = inv.force_n
-                model_status[idx] = inv.status
-                for dst, src in zip(new, state_arrays(gstate), strict=True):
-                    dst[idx] = src
-            new_state_model = state_from_arrays(new)
-            if self.conversions is not None:
-                self.conversions.apply(r_model, force, model_status)
-        static: FloatArray | None = None
-        curve_state = state.curve_state
-        if self.curves is not None:
-            pos = self.curves.positions
-            # the open rail read as a reading (fault bitmaps, _BIG_OHM): no current, an open
-            # sensor at rest, which a curve reads at +inf ohm as 0 N (a finite R reads > 0 N)
-            r_curve = np.where(r_model[pos] >= _BIG_OHM, np.inf, r_model[pos])
-            # the short rail read as a reading (fault bitmaps): less resistance than the
-            # converter resolves. No force along the curve means anything there, and it must
-            # not move the drift state: the curve gets no sample, the channel reads saturated
-            # at the top of its calibrated range
-            short = (r_curve > 0.0) & (r_curve <= _TINY_OHM)
+            r_out, r_model, base = self._resistance(raw)
+            r_model = self._tare(r_model)
+            usable = base == _CHANNEL_OK
+            if not usable.all():
+                r_model = np.where(usable, r_model, np.nan)
+            with np.errstate(invalid="ignore"):
+                short = (r_model > 0.0) & (r_model <= _TINY_OHM)
+                r_model = np.where(r_model >= _BIG_OHM, np.inf, r_model)
             if short.any():
-                r_curve = np.where(short, np.nan, r_curve)
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                f, st, x, extrapolated, curve_state = self.curves.track(
-                    r_curve, curve_state or self.curves.initial_state(), dt
-                )
-            st = np.where(extrapolated, np.int8(_FORCE_EXTRAPOLATED), st)
-            if short.any():
-                top = self.curves.high
-                f = np.where(short, np.where(np.isfinite(top), top, np.nan), f)
-                st = np.where(short, np.int8(_FORCE_SATURATED), st)
-            force[pos], model_status[pos] = f, st
-            static = np.full(n, np.nan)
-            static[pos] = np.where(np.isnan(f), np.nan, np.maximum(x, 0.0))
+                r_model = np.where(short, np.nan, r_model)
+            else:
+                short = None
+        step = Step(
+            r_model, temperature, dt, state.model_state, state.curve_state,
+            np.full(n, np.nan), np.full(n, _FORCE_INVALID, dtype=np.int8), np.full(n, np.nan), apparent,
+        )  # fmt: skip
+        for conv in self.converters:
+            conv.track(step)
+        force, model_status = step.force_n, step.status
+        if short is not None:
+            force = np.where(short, self._top_n, force)
+            model_status = np.where(short, np.int8(_FORCE_SATURATED), model_status)
         if self._calibrated is not None:
             # a force read inside the model's (or curve's, line's, lookup's) own range but
             # outside the range the channel was calibrated on is extrapolated
@@ -419,10 +407,13 @@ class DeviceProcessor:
                 outside = (model_status == _FORCE_OK) & ((force < low) | (force > high))
             if outside.any():
                 model_status = np.where(outside, np.int8(_FORCE_EXTRAPOLATED), model_status)
+        model_state = state.model_state if step.new_model is None else state_from_arrays(step.new_model)
+        curve_state = step.new_curve_state if step.new_curve_state is not None else state.curve_state
+        static = None if self.curves is None else step.static_n
         return TrackedSample(
             raw, r_out, r_model, base, force, model_status, temperature,
-            DeviceState(new_state_model, now, host_time_s, use_device, None, clock_health, curve_state),
-            wall_time_s, static, self._idle_unzeroed(raw),
+            DeviceState(model_state, now, host_time_s, use_device, None, clock_health, curve_state),
+            wall_time_s, static, None if self.output else self._idle_unzeroed(raw),
         )  # fmt: skip
 
     def _idle_unzeroed(self, raw: RawSample) -> NDArray[np.bool_] | None:
@@ -447,32 +438,6 @@ class DeviceProcessor:
             area_mm2 = self.device.layout.cell_area_mm2
             return np.asarray(raw.output_pressure_kpa[self._pick], dtype=np.float64) * (area_mm2 * 1e-3)
         raise DecodeError("a device with a calibrated output needs its force or pressure values")
-
-    def _track_output(
-        self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
-    ) -> TrackedSample:
-        """``track`` for a device that reports force or pressure itself: a value that is not a
-        finite number is an error (flagged, never published as a force); the rest is the
-        device's static reading x, tracked for drift when the configuration asks for it."""
-        assert self.output is not None
-        n = len(self.channels)
-        x = self._output_force(raw)
-        bad = ~np.isfinite(x)
-        base = np.where(bad, np.int8(_CHANNEL_ERROR), np.int8(_CHANNEL_OK)).astype(np.int8)
-        x = np.where(bad, np.nan, x)
-        dt, now, use_device, clock_health = self._dt(state, raw, host_time_s)
-        with np.errstate(invalid="ignore"):
-            force, status, apparent, _, curve_state = self.output.track_apparent(
-                x, state.curve_state or self.output.initial_state(), dt
-            )
-        temperature = None if raw.temperature_c is None else raw.temperature_c[self._pick]
-        nan = np.full(n, np.nan)
-        static = np.where(np.isnan(force), np.nan, np.maximum(apparent, 0.0))
-        return TrackedSample(
-            raw, nan, nan, base, force, status, temperature,
-            DeviceState(state.model_state, now, host_time_s, use_device, None, clock_health, curve_state),
-            wall_time_s, static,
-        )  # fmt: skip
 
     def finish(self, tracked: TrackedSample) -> tuple[DeviceSnapshot, DeviceState]:
         """Second step of ``process``: statuses, array quantities and the snapshot."""
@@ -500,21 +465,12 @@ class DeviceProcessor:
             read_only(force),
         )
         static: StaticEstimate
-        if self.output is not None:
-            every = np.arange(len(self.channels), dtype=np.intp)
-            by_channel = tracked.converted_static_n if tracked.converted_static_n is not None else force
-            static = _StaticWithConversions(*inputs, every, read_only(np.where(valued, by_channel, np.nan)))
-        elif self.conversions is None and self.curves is None:
+        if self.curves is None:
             static = StaticEstimate(*inputs)
         else:
-            converted = np.concatenate(
-                [c.positions for c in (self.conversions, self.curves) if c is not None]
-            ).astype(np.intp)
-            by_channel = np.array(force, dtype=np.float64)
-            if tracked.converted_static_n is not None and self.curves is not None:
-                by_channel[self.curves.positions] = tracked.converted_static_n[self.curves.positions]
+            by_channel = tracked.converted_static_n if tracked.converted_static_n is not None else force
             static = _StaticWithConversions(
-                *inputs, converted, read_only(np.where(valued, by_channel, np.nan))
+                *inputs, self.curves.positions, read_only(np.where(valued, by_channel, np.nan))
             )
         snap = DeviceSnapshot(
             device=self.device.name,

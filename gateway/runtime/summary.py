@@ -15,7 +15,6 @@ from collections import Counter
 
 from ..config import DeviceConfig
 from ..model import RatioFrontEnd
-from ..model.conversion import LineConversion
 from ..model.curves import CurveChannel
 
 __all__ = ["device_summary"]
@@ -63,15 +62,14 @@ def _tracking(device: DeviceConfig) -> list[str]:
     lines = []
     by_way: Counter[str] = Counter()
     for ch in chans:
-        if isinstance(ch.conversion, CurveChannel):
+        if isinstance(ch.conversion, CurveChannel) and ch.conversion.table_kind != "curve":
+            way = f"calibration {ch.conversion.table_kind} (static: no drift correction)"
+        elif isinstance(ch.conversion, CurveChannel):
             way = f"calibration curve {ch.conversion.describe()}"
             if ch.conversion.drift.active:
                 way += f" (drift correction on, {_clock(device)})"
             else:
                 way += " (no drift correction)"
-        elif ch.conversion is not None:
-            kind = "line" if isinstance(ch.conversion, LineConversion) else "lookup"
-            way = f"calibration {kind} (static: no drift correction)"
         else:
             tracked = [e for e in ch.effects if e in ("creep", "hysteresis", "creep2", "temperature")]
             dynamic = [e for e in tracked if e != "temperature"]

@@ -215,14 +215,14 @@ async def test_the_page_draws_extrapolated_channels_apart(browser: Any, tmp_path
     from gateway.metrics.server import MetricsServer
     from gateway.modbus.image import RawSample
     from gateway.model import PAPER_EFFECTS, Divider, SensorParams
-    from gateway.model.conversion import LineConversion
+    from gateway.model.conversion import line_conversion
     from gateway.runtime.poller import SnapshotHolder
     from gateway.runtime.processor import DeviceProcessor
     from gateway.runtime.snapshot import GatewaySnapshot
     from gateway.web import FrameHub, WebPage
 
     m, n = 2e-5, 1e-6
-    line = LineConversion(m, n, 0.5, 5.0)  # a line calibrated on 0.5-5 N
+    line = line_conversion(m, n, 0.5, 5.0)  # a line calibrated on 0.5-5 N
     channels = tuple(
         ChannelConfig(k, f"ch{k:02d}", (k % 4) * PITCH_MM, (k // 4) * PITCH_MM, True, PAPER_EFFECTS,
                       SensorParams(), None, line)

@@ -22,7 +22,7 @@ from gateway.metrics.server import MAX_CONNECTIONS, MetricsServer
 from gateway.metrics.web_config import WebConfig
 from gateway.modbus.image import RawSample
 from gateway.model import PAPER_EFFECTS, Divider, SensorParams
-from gateway.model.conversion import LineConversion
+from gateway.model.conversion import line_conversion
 from gateway.runtime.poller import Poller, SnapshotHolder
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import GatewaySnapshot
@@ -166,7 +166,7 @@ async def steady_page(
     at its one poll, the channels ``disabled`` turned off in its configuration, served
     with the page: the map does not move, so its pixels can be checked exactly."""
     m, n = 2e-5, 1e-6
-    line = LineConversion(m, n, 0.01, 50.0)
+    line = line_conversion(m, n, 0.01, 50.0)
     channels = tuple(
         ChannelConfig(k, f"ch{k:02d}", (k % 4) * PITCH_MM, (k // 4) * PITCH_MM, k not in disabled,
                       PAPER_EFFECTS, SensorParams(), None, line)

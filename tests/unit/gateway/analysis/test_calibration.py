@@ -129,10 +129,10 @@ def test_a_line_with_a_negative_intercept_is_written_to_read_from_above_its_zero
     import tomllib
 
     from gateway.analysis.rivals import line_range_lines
-    from gateway.model import ConductanceLine
     from gateway.model.conversion import ConversionSet, conversion_from_table
+    from gateway.model.static_curves import LineCurve
 
-    line = ConductanceLine(2e-5, -1e-5)
+    line = LineCurve(2e-5, -1e-5)
     extra = line_range_lines(line, 0.3)
     table = tomllib.loads(
         f"slope_s_per_n = {line.slope_s_per_n!r}\nintercept_s = {line.intercept_s!r}\n" + "\n".join(extra)
@@ -146,7 +146,7 @@ def test_a_line_with_a_negative_intercept_is_written_to_read_from_above_its_zero
     with pytest.raises(ValueError, match=r"zero conductance at 0\.5 N"):
         conversion_from_table("line", {"slope_s_per_n": 2e-5, "intercept_s": -1e-5}, 0.3, 8.0)
     # a positive intercept, or a record that starts well above the zero, adds nothing
-    assert line_range_lines(ConductanceLine(2e-5, 1e-6), 0.05) == []
+    assert line_range_lines(LineCurve(2e-5, 1e-6), 0.05) == []
     assert line_range_lines(line, 0.6) == []
 
 

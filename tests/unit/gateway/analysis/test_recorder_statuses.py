@@ -12,7 +12,7 @@ from gateway.config import ChannelConfig, DeviceConfig, RegisterMap, bus_config_
 from gateway.config.layout import GridLayout
 from gateway.modbus.image import RawSample
 from gateway.model import PAPER_EFFECTS, Divider, SensorParams
-from gateway.model.conversion import LineConversion
+from gateway.model.conversion import line_conversion
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import ChannelStatus, GatewaySnapshot
 
@@ -20,7 +20,7 @@ M, N = 2e-5, 1e-6
 
 
 def test_extrapolated_rows_are_recorded() -> None:
-    line = LineConversion(M, N, 0.5, 5.0)
+    line = line_conversion(M, N, 0.5, 5.0)
     channels = tuple(
         ChannelConfig(k, f"ch{k:02d}", 2.5 * k, 0.0, True, PAPER_EFFECTS, SensorParams(), None, line)
         for k in range(4)

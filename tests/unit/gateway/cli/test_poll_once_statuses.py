@@ -10,12 +10,12 @@ from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
 from gateway.config.layout import GridLayout
 from gateway.modbus.image import RawSample
 from gateway.model import PAPER_EFFECTS, Divider, SensorParams
-from gateway.model.conversion import LineConversion
+from gateway.model.conversion import line_conversion
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import GatewaySnapshot
 
 M, N = 2e-5, 1e-6
-LINE = LineConversion(M, N, 0.5, 5.0)  # calibrated on 0.5-5 N
+LINE = line_conversion(M, N, 0.5, 5.0)  # calibrated on 0.5-5 N
 
 
 def _snapshot() -> GatewaySnapshot:

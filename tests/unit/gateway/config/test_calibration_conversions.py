@@ -15,7 +15,8 @@ from gateway.config import DeviceConfig, parse_config
 from gateway.errors import ConfigError
 from gateway.modbus.image import RawSample
 from gateway.model import SensorModel, SensorParams
-from gateway.model.conversion import LineConversion, LookupConversion
+from gateway.model.conversion import line_conversion, lookup_conversion
+from gateway.model.static_curves import LineCurve
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import ChannelStatus
 
@@ -59,15 +60,15 @@ held_out_force_rms_n = 0.1
 
 def test_a_line_table_gives_the_channel_a_line_with_its_force_range(tmp_path: Path) -> None:
     dev = _device(tmp_path, LINE)
-    assert dev.channel("tip").conversion == LineConversion(2e-5, 1e-6, 0.2, 12.0)
+    assert dev.channel("tip").conversion == line_conversion(2e-5, 1e-6, 0.2, 12.0)
     assert dev.channel("ch01").conversion is None
     own = LINE.replace("intercept_s = 1e-6", "intercept_s = 1e-6\nforce_min_n = 0.1\nforce_max_n = 5")
-    assert _device(tmp_path, own).channel("tip").conversion == LineConversion(2e-5, 1e-6, 0.1, 5.0)
+    assert _device(tmp_path, own).channel("tip").conversion == line_conversion(2e-5, 1e-6, 0.1, 5.0)
 
 
 def test_a_lookup_table_gives_the_channel_a_lookup(tmp_path: Path) -> None:
     dev = _device(tmp_path, '[lookup."ch01"]\nresistance_ohm = [1e3, 1e4, 1e5]\nforce_n = [8, 2, 0.5]\n')
-    assert dev.channel("ch01").conversion == LookupConversion((1e3, 1e4, 1e5), (8.0, 2.0, 0.5))
+    assert dev.channel("ch01").conversion == lookup_conversion((1e3, 1e4, 1e5), (8.0, 2.0, 0.5))
     assert dev.channel("tip").conversion is None
 
 
@@ -140,8 +141,8 @@ def test_calibrate_model_line_file_reads_through_the_processor(tmp_path: Path) -
 
     dev = _device(tmp_path, text)
     line = dev.channel("tip").conversion
-    assert isinstance(line, LineConversion)
-    assert (line.slope_s_per_n, line.intercept_s) == (m, n)
+    assert line is not None and line.table_kind == "line" and isinstance(line.curve, LineCurve)
+    assert (line.curve.slope_s_per_n, line.curve.intercept_s) == (m, n)
     # this record's line has n < 0: it starts at 1.1 x its zero-conductance force -n/m, above the
     # record's lowest force (the channel's force_min_n), so a sensor at rest reads no contact
     assert n < 0

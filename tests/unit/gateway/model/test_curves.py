@@ -37,9 +37,10 @@ LOOKUP = LookupCurve((1e3, 1e4, 1e5), (8.0, 2.0, 0.5))
 def run(
     cset: CurveSet, resistance_ohm: Sequence[Sequence[float]], time_s: Sequence[float]
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[CurveState]]:
-    """``CurveSet.track`` sample by sample (dt = time since the previous sample, 0 first):
-    forces, statuses, static forces, extrapolated flags (samples x channels) and the states."""
-    state = cset.initial_state()
+    """``CurveSet.track`` sample by sample (dt = time since the previous sample, 0 first) from
+    a sensor at rest: forces, statuses, static forces, extrapolated flags (samples x channels)
+    and the states."""
+    state = cset.rested_state()
     out: list[tuple[np.ndarray, ...]] = []
     states = []
     for k, r in enumerate(resistance_ohm):
@@ -181,7 +182,7 @@ def test_gain_reads_the_conductance_scaled_and_offset_adds() -> None:
     # power law n = 1: G = 2e-4 S at 5 kohm -> 2 N; gain 2 reads 4e-4 S -> 4 N; offset adds
     r = 5000.0
     assert float(CurveChannel(PowerLawCurve(1e-4, 1.0), gain=2.0).static_force(r)) == pytest.approx(4.0)
-    both = CurveChannel(PowerLawCurve(1e-4, 1.0), gain=2.0, offset_n=0.5)
+    both = CurveChannel(PowerLawCurve(1e-4, 1.0), gain=2.0, offset_n=0.5, force_min_n=0.6)
     assert float(both.static_force(r)) == pytest.approx(4.5, rel=1e-12)
     # n = 0.5: gain 2 -> (4e-4 / 1e-4)^2 = 16 N
     sq = CurveChannel(PowerLawCurve(1e-4, 0.5), gain=2.0)
@@ -198,7 +199,7 @@ def test_gain_reads_the_conductance_scaled_and_offset_adds() -> None:
     f, s, _, _, _ = run(CurveSet(chans), [rs.tolist()], [0.0])
     np.testing.assert_allclose(f[0], [4.5, 16.0, 19.0, 2.25], rtol=1e-12)
     assert s[0].tolist() == [OK] * 4
-    assert both.with_sensitivity(1.0, 0.0) == CurveChannel(PowerLawCurve(1e-4, 1.0))
+    assert both.with_sensitivity(1.0, 0.0) == CurveChannel(PowerLawCurve(1e-4, 1.0), force_min_n=0.6)
 
 
 # ---------------------------------------------------------------- statuses and the range
@@ -208,7 +209,7 @@ def test_open_invalid_no_contact_and_extrapolated() -> None:
     kinds: list[StaticCurve] = [PowerLawCurve(1e-4, 1.0), LineCurve(2e-5, -1e-6), LOOKUP]
     for curve in kinds:
         # an offset must not make an open sensor read a load
-        ch = CurveChannel(curve, Drift(creep_fraction=0.1), offset_n=0.3)
+        ch = CurveChannel(curve, Drift(creep_fraction=0.1), offset_n=0.3, force_min_n=2.0)
         r = [math.inf, math.nan, 0.0, -5.0, -math.inf]
         f, s, x, e, _ = run(CurveSet([ch] * len(r)), [r], [0.0])
         assert s[0].tolist() == [NO_CONTACT] + [INVALID] * 4, curve
@@ -217,7 +218,7 @@ def test_open_invalid_no_contact_and_extrapolated() -> None:
         assert not e[0].any()
         assert ch.static_force([math.inf])[0] == 0.0
         assert np.isnan(ch.static_force([math.nan, 0.0, -5.0])).all()
-        series, static = track_series(ch, r, [0.0, 1.0, 2.0, 3.0, 4.0])
+        series, static = track_series(ch, r, [0.0, 1.0, 2.0, 3.0, 4.0], from_rest=True)
         assert series[0] == 0.0 and np.isnan(series[1:]).all() and static[0] == 0.0
 
 
@@ -242,7 +243,7 @@ def test_invalid_samples_keep_the_held_force_and_the_dynamics_run_on() -> None:
     assert s[:, 0].tolist() == [OK, INVALID, OK]
     assert np.isnan(f[1, 0]) and states[1].last_force_n[0] == 4.0
     assert f[2, 0] == pytest.approx(4.0, rel=1e-12)
-    np.testing.assert_allclose(track_series(ch, r, t)[0], f[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(track_series(ch, r, t, from_rest=True)[0], f[:, 0], rtol=1e-12)
 
 
 # ---------------------------------------------------------------- creep by hand
@@ -268,7 +269,7 @@ def test_a_held_step_under_creep_reads_the_applied_force(two: bool) -> None:
     x = force * (1.0 + a1 * (1.0 - np.exp(-since / tau1)) + a2 * (1.0 - np.exp(-since / tau2)))
     r = np.where(since < 0, np.inf, 1.0 / (k * x**n))
     f_set, status, static, _, states = run(CurveSet([ch]), r[:, None].tolist(), t.tolist())
-    f_series, x_series = track_series(ch, r, t)
+    f_series, x_series = track_series(ch, r, t, from_rest=True)
     loaded = since >= 0
     expected = np.where(loaded, force, 0.0)
     np.testing.assert_allclose(f_set[:, 0], expected, rtol=1e-12, atol=1e-12)
@@ -308,7 +309,7 @@ def test_recovery_after_unloading_decays_with_tau() -> None:
     r = 1.0 / (k * (applied + z))
     f, _, static, _, states = run(CurveSet([ch]), r[:, None].tolist(), t.tolist())
     np.testing.assert_allclose(f[:, 0], applied, atol=1e-12)
-    np.testing.assert_allclose(track_series(ch, r, t)[0], applied, atol=1e-12)
+    np.testing.assert_allclose(track_series(ch, r, t, from_rest=True)[0], applied, atol=1e-12)
     z1 = np.array([s.z1[0] for s in states])
     assert z1[9] == pytest.approx(0.894601, abs=1e-6)
     assert z1[13] == pytest.approx(0.329106, abs=1e-6)
@@ -340,7 +341,9 @@ def _channel(kind: int, p: tuple[float, float], drift: Drift, gain: float, offse
     else:
         step = 1.0 + 4.0 * p[1]
         curve = LookupCurve((300.0, 3e3, 3e4, 3e5), (10.0 * step, 3.0 * step, step, 0.2 * step - 0.5 * p[0]))
-    return CurveChannel(curve, drift, gain=gain, offset_n=offset, force_min_n=0.5, force_max_n=8.0)
+    # a curve that reads a force at zero conductance starts above it (``with_range``)
+    wide = CurveChannel(curve, drift, gain=gain, offset_n=offset, force_min_n=1e6, force_max_n=2e6)
+    return wide.with_range(0.5, 8.0)
 
 
 drifts = st.builds(
@@ -368,16 +371,24 @@ series = st.lists(st.tuples(st.floats(0.0, 5.0), resistances), min_size=1, max_s
 
 
 @settings(max_examples=200, deadline=None)
-@given(channel=channels, samples=series, t0=st.floats(-10.0, 10.0))
+@given(channel=channels, samples=series, t0=st.floats(-10.0, 10.0), from_rest=st.booleans())
 def test_track_sample_by_sample_equals_track_series(
-    channel: CurveChannel, samples: list[tuple[float, float]], t0: float
+    channel: CurveChannel, samples: list[tuple[float, float]], t0: float, from_rest: bool
 ) -> None:
+    """The vectorised tracker and the series tracker read the same forces, from rest and from
+    the equilibrium at the first load alike."""
     t = (t0 + np.cumsum([dt for dt, _ in samples])).tolist()
     r = [v for _, v in samples]
-    f, _, x, _, _ = run(CurveSet([channel]), [[v] for v in r], t)
-    f_series, x_series = track_series(channel, r, t)
-    np.testing.assert_allclose(f[:, 0], f_series, rtol=1e-9, atol=1e-12, equal_nan=True)
-    np.testing.assert_allclose(x[:, 0], x_series, rtol=1e-9, atol=1e-12, equal_nan=True)
+    cset = CurveSet([channel])
+    state = cset.rested_state() if from_rest else cset.initial_state()
+    f, x = np.full(len(r), np.nan), np.full(len(r), np.nan)
+    for k, v in enumerate(r):
+        dt = t[k] - t[k - 1] if k else 0.0
+        fk, _, xk, _, state = cset.track(np.array([v]), state, dt)
+        f[k], x[k] = fk[0], xk[0]
+    f_series, x_series = track_series(channel, r, t, from_rest=from_rest)
+    np.testing.assert_allclose(f, f_series, rtol=1e-9, atol=1e-12, equal_nan=True)
+    np.testing.assert_allclose(x, x_series, rtol=1e-9, atol=1e-12, equal_nan=True)
 
 
 @settings(max_examples=150, deadline=None)
@@ -463,7 +474,7 @@ BASE_POWER = 'kind = "power_law"\ncoefficient_s = 1e-4\nexponent = 0.8\n'
     [
         (BASE_POWER + "exponnent = 1\n", "exponnent", "allowed: kind, gain, offset_n"),
         ('kind = "power_law"\ncoefficient_s = 1e-4\n', "exponent", "required key is missing"),
-        ('kind = "line"\nslope_s_per_n = 1e-5\n', "intercept_s", "line curves need slope_s_per_n and"),
+        ('kind = "line"\nslope_s_per_n = 1e-5\n', "intercept_s", "line tables need slope_s_per_n and"),
         ('kind = "spline"\n', "kind", "allowed: power_law, line, lookup"),
         ("coefficient_s = 1e-4\nexponent = 1\n", "kind", "allowed: power_law, line, lookup"),
         (BASE_POWER.replace("0.8", "-0.8"), "exponent", "allowed: (0, 10]"),
@@ -478,12 +489,12 @@ BASE_POWER = 'kind = "power_law"\ncoefficient_s = 1e-4\nexponent = 0.8\n'
         (
             'kind = "lookup"\nresistance_ohm = [1e3, 1e3]\nforce_n = [2, 1]\n',
             "resistance_ohm[1]",
-            "must increase",
+            "strictly increasing",
         ),
         (
             'kind = "lookup"\nresistance_ohm = [1e4, 1e3]\nforce_n = [2, 1]\n',
             "resistance_ohm[1]",
-            "must increase",
+            "strictly increasing",
         ),
         (
             'kind = "lookup"\nresistance_ohm = [1e3, 1e4, 1e5]\nforce_n = [2, 1, 1.5]\n',
@@ -510,7 +521,7 @@ BASE_POWER = 'kind = "power_law"\ncoefficient_s = 1e-4\nexponent = 0.8\n'
         (BASE_POWER + "gain = 0\n", "gain", "allowed: (0, inf)"),
         (BASE_POWER + "offset_n = nan\n", "offset_n", "finite"),
         (BASE_POWER + "force_min_n = -1\n", "force_min_n", "allowed: [0, inf) N"),
-        (BASE_POWER + "force_min_n = 2\nforce_max_n = 2\n", "force_max_n", "(force_min_n = 2, inf] N"),
+        (BASE_POWER + "force_min_n = 2\nforce_max_n = 2\n", "force_max_n", "(force_min_n = 2.0, inf] N"),
     ],
 )
 def test_bad_tables_name_the_key_and_the_allowed_range(text: str, key: str, allowed: str) -> None:
@@ -549,7 +560,7 @@ def test_hysteresis_loading_reads_low_unloading_high_by_hand() -> None:
     assert status[:, 0].tolist() == [OK] * 7
     np.testing.assert_allclose(states[2].play_n[0], [9.75, 9.5, 9.0, 8.0], rtol=1e-12)
     np.testing.assert_allclose(states[6].play_n[0], [2.25, 2.5, 3.0, 4.0], rtol=1e-12)
-    np.testing.assert_allclose(track_series(ch, r, t)[0], expected, rtol=1e-12)
+    np.testing.assert_allclose(track_series(ch, r, t, from_rest=True)[0], expected, rtol=1e-12)
     # rate-independent: the same readings at other times read the same forces
     np.testing.assert_allclose(one(ch, r, [0.0, 0.01, 5.0, 5.5, 100.0, 100.1, 1e4]), expected, rtol=1e-12)
     # an invalid sample leaves the plays where they were
@@ -569,4 +580,4 @@ def test_creep_and_hysteresis_together_by_hand() -> None:
     assert x[-1] == pytest.approx(4.291732, abs=1e-6)
     f, _, _, _, _ = run(CurveSet([ch]), [[1.0 / (k * v)] for v in x], t.tolist())
     np.testing.assert_allclose(f[:, 0], 4.0, rtol=1e-12)
-    np.testing.assert_allclose(track_series(ch, 1.0 / (k * x), t)[0], 4.0, rtol=1e-12)
+    np.testing.assert_allclose(track_series(ch, 1.0 / (k * x), t, from_rest=True)[0], 4.0, rtol=1e-12)

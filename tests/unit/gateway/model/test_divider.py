@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gateway.model import ConductanceLine, Divider, DividerStatus, SensorModel, SensorParams
+from gateway.model import Divider, DividerStatus, SensorModel, SensorParams
+from gateway.model.static_curves import LineCurve
 
 
 def test_voltage_by_hand() -> None:
@@ -51,23 +52,23 @@ def test_divider_rejects_bad_constants() -> None:
 
 
 def test_conductance_line_fit_and_force() -> None:
-    line = ConductanceLine(slope_s_per_n=2e-5, intercept_s=1e-6)
+    line = LineCurve(slope_s_per_n=2e-5, intercept_s=1e-6)
     force = np.array([0.5, 1.0, 3.0])
     r = 1.0 / line.conductance(force)
-    fitted = ConductanceLine.fit(force, r)
+    fitted = LineCurve.fit_conductance(force, r)
     assert fitted.slope_s_per_n == pytest.approx(2e-5, rel=1e-9)
     assert fitted.intercept_s == pytest.approx(1e-6, rel=1e-6)
     np.testing.assert_allclose(fitted.force(r), force, rtol=1e-9)
     assert float(line.force(np.inf)) == pytest.approx(-0.05)
     with pytest.raises(ValueError, match="two distinct forces"):
-        ConductanceLine.fit([1.0, 1.0], [1e3, 2e3])
+        LineCurve.fit_conductance([1.0, 1.0], [1e3, 2e3])
 
 
 def test_conductance_line_is_an_approximation_the_model_beats() -> None:
     m = SensorModel("tunneling,contact", [SensorParams()] * 30)
     force = np.linspace(0.5, 5.0, 30)
     r = m.resistance(force)
-    line = ConductanceLine.fit(force, r)
+    line = LineCurve.fit_conductance(force, r)
     assert line.slope_s_per_n > 0
     line_error = np.abs(line.force(r) - force).max()
     model_error = np.abs(m.invert_static(r).force_n - force).max()

@@ -16,16 +16,24 @@ from gateway.model import PAPER_EFFECTS, Divider, ForceStatus, SensorModel, Sens
 from gateway.model.conversion import (
     Conversion,
     ConversionError,
-    ConversionSet,
-    LineConversion,
-    LookupConversion,
+    line_conversion,
+    lookup_conversion,
 )
+from gateway.model.tracker import CurveSet
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import ChannelStatus
 
 M, N = 2e-5, 1e-6  # S/N, S
-LINE = LineConversion(slope_s_per_n=M, intercept_s=N, force_min_n=0.05, force_max_n=10.0)
-LOOKUP = LookupConversion(resistance_ohm=(1e3, 1e4, 1e5), force_n=(8.0, 2.0, 0.5))
+LINE = line_conversion(slope_s_per_n=M, intercept_s=N, force_min_n=0.05, force_max_n=10.0)
+LOOKUP = lookup_conversion(resistance_ohm=(1e3, 1e4, 1e5), force_n=(8.0, 2.0, 0.5))
+
+
+def _apply(conversions: list[Conversion], r: np.ndarray, force: np.ndarray, status: np.ndarray) -> None:
+    """The tracker's reading of one sample (force N, ``ForceStatus`` with extrapolated)."""
+    curves = CurveSet(conversions)
+    f, st, _, extrapolated, _ = curves.track(np.asarray(r, dtype=np.float64), curves.initial_state(), 0.0)
+    force[:] = f
+    status[:] = np.where(extrapolated, np.int8(ForceStatus.EXTRAPOLATED), st)
 
 
 def _r_line(force_n: float) -> float:
@@ -95,9 +103,8 @@ def test_line_beyond_its_range_reads_along_itself_flagged_extrapolated() -> None
         _r_line(10.0),  # at the upper bound
         _r_line(25.0),  # beyond it: read along the line, never clipped, and the status says so
     ]
-    conv = ConversionSet([LINE] * len(rs))
     force, status = np.zeros(len(rs)), np.zeros(len(rs), dtype=np.int8)
-    conv.apply(np.array(rs), force, status)
+    _apply([LINE] * len(rs), np.array(rs), force, status)
     labels = [ForceStatus(s).name.lower() for s in status]
     assert labels == ["ok", "ok", "extrapolated"] + ["no_contact"] * 4 + ["ok", "ok", "extrapolated"]
     np.testing.assert_allclose(
@@ -112,18 +119,19 @@ def test_line_beyond_its_range_reads_along_itself_flagged_extrapolated() -> None
 def test_a_short_rail_read_as_a_reading_is_saturated_not_extrapolated_to_1e300_n() -> None:
     """With fault bitmaps a 0 ohm reading that is not flagged short reaches the conversion as
     the smallest normal float: less than the converter resolves, so saturated at the bound."""
-    tiny = float(np.finfo(np.float64).tiny)
-    force, status = np.zeros(2), np.zeros(2, dtype=np.int8)
-    ConversionSet([LINE, LOOKUP]).apply(np.array([tiny, tiny]), force, status)
-    assert status.tolist() == [ForceStatus.SATURATED] * 2
-    np.testing.assert_array_equal(force, [10.0, 8.0])
+    proc = DeviceProcessor(make_device([LINE, LOOKUP]), "bus", 0.1)
+    no_fault = np.zeros(2, dtype=np.bool_)
+    raw = RawSample(resistance_ohm=np.array([0.0, 0.0]), open_bits=no_fault, short_bits=no_fault)
+    snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
+    assert [ChannelStatus(s).label for s in snap.status] == ["saturated"] * 2
+    np.testing.assert_array_equal(snap.force_n, [10.0, 8.0])
 
 
 def test_garbage_resistances_are_errors_not_forces() -> None:
     r = np.array([np.nan, -5.0, 0.0, -np.inf])
     force = np.zeros(4)
     status = np.zeros(4, dtype=np.int8)
-    ConversionSet([LINE, LINE, LOOKUP, LOOKUP]).apply(r, force, status)
+    _apply([LINE, LINE, LOOKUP, LOOKUP], r, force, status)
     assert status.tolist() == [ForceStatus.INVALID] * 4
     assert np.isnan(force).all()
     # through the processor: NaN and negative are errors; 0 ohm and +inf are the rails, as for any channel
@@ -151,7 +159,7 @@ def test_lookup_beyond_its_knots_reads_along_its_end_segments_flagged_extrapolat
     expected = [8.0 + 6.0 * math.log10(2.0), 14.0, 0.25, 0.0, 0.0, math.nan]
     np.testing.assert_allclose(force, expected, rtol=1e-12)
     raw_force, raw_status = np.zeros(1), np.zeros(1, dtype=np.int8)
-    ConversionSet([LOOKUP]).apply(np.array([math.inf]), raw_force, raw_status)  # open as a reading
+    _apply([LOOKUP], np.array([math.inf]), raw_force, raw_status)  # open as a reading
     assert raw_status[0] == ForceStatus.NO_CONTACT and raw_force[0] == 0.0
 
 
@@ -159,8 +167,8 @@ def test_a_lookup_with_flat_ends_extends_along_its_sloped_end_segments() -> None
     """A bench's holds give bins of equal median force: a flat end extended flat would read
     its force at any resistance beyond it (a phantom force at rest). The lookup extends along
     the segment to the nearest knot of another force, as its unloaded conductance does."""
-    flat = LookupConversion((1e3, 2e3, 1e4, 1e5, 2e5), (8.0, 8.0, 2.0, 0.5, 0.5))
-    rs = [500.0, 2e5 * 10 ** (1 / 6), 1e7, 1.0 / flat.unloaded_conductance_s]
+    flat = lookup_conversion((1e3, 2e3, 1e4, 1e5, 2e5), (8.0, 8.0, 2.0, 0.5, 0.5))
+    rs = [500.0, 2e5 * 10 ** (1 / 6), 1e7, flat.unloaded_resistance_ohm]
     force, status = _read([flat] * len(rs), rs)
     assert status == ["extrapolated", "extrapolated", "no_contact", "no_contact"]
     # first sloped segment: 1e3..1e4 (8 -> 2 N), last: 1e4..2e5 (2 -> 0.5 N)
@@ -170,7 +178,7 @@ def test_a_lookup_with_flat_ends_extends_along_its_sloped_end_segments() -> None
 
 
 def test_lookups_of_different_lengths_and_lines_in_one_device() -> None:
-    five = LookupConversion((100.0, 200.0, 400.0, 800.0, 1600.0), (20.0, 10.0, 10.0, 5.0, 1.0))
+    five = lookup_conversion((100.0, 200.0, 400.0, 800.0, 1600.0), (20.0, 10.0, 10.0, 5.0, 1.0))
     rs = [_r_line(3.0), math.sqrt(1e4 * 1e5), 300.0, 1131.370849898476, _r_line(7.5)]
     force, status = _read([LINE, LOOKUP, five, five, LINE], rs)
     assert status == ["ok"] * 5
@@ -178,11 +186,11 @@ def test_lookups_of_different_lengths_and_lines_in_one_device() -> None:
 
 
 def test_a_lookup_that_goes_below_zero_reads_no_contact_there() -> None:
-    lk = LookupConversion((1e3, 1e4), (4.0, -4.0))
+    lk = lookup_conversion((1e3, 1e4), (4.0, -4.0))
     force, status = _read([lk, lk, lk], [1e3 * 10**0.25, math.sqrt(1e3 * 1e4), 1e3 * 10**0.75])
     assert status == ["ok", "no_contact", "no_contact"]
     np.testing.assert_allclose(force, [2.0, 0.0, 0.0], rtol=1e-12)
-    assert lk.unloaded_conductance_s == pytest.approx(1 / math.sqrt(1e3 * 1e4))
+    assert 1.0 / lk.unloaded_resistance_ohm == pytest.approx(1 / math.sqrt(1e3 * 1e4))
 
 
 def test_channels_without_a_conversion_are_bitwise_unchanged() -> None:
@@ -192,7 +200,7 @@ def test_channels_without_a_conversion_are_bitwise_unchanged() -> None:
     mixed = make_device([None, LINE, None, None, LOOKUP, None])
     plain = make_device([None] * 6, enabled=[True, False, True, True, False, True])
     a, b = DeviceProcessor(mixed, "bus", 0.1), DeviceProcessor(plain, "bus", 0.1)
-    assert DeviceProcessor(make_device([None] * 6), "bus", 0.1).conversions is None
+    assert DeviceProcessor(make_device([None] * 6), "bus", 0.1).curves is None
     sa, sb = a.initial_state(), b.initial_state()
     for k, t in enumerate([0.0, 1.0, 5.0, 30.0]):
         raw = RawSample(resistance_ohm=rs * (1.0 - 0.01 * k), device_time_s=t)
@@ -219,14 +227,14 @@ def test_baseline_is_taken_off_before_the_line() -> None:
     baseline = 40e3
     dev = make_device([LINE, LOOKUP], baseline_ohm=[baseline, 2e5])
     proc = DeviceProcessor(dev, "bus", 0.1)
-    excess = 1.0 / baseline - LINE.unloaded_conductance_s
+    excess = 1.0 / baseline - 1.0 / LINE.unloaded_resistance_ohm
     loaded = 1.0 / (M * 3.0 + N + excess)
     raw = RawSample(resistance_ohm=np.array([baseline, 2e5]))
     snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
     assert [ChannelStatus(s).label for s in snap.status] == ["no_contact", "no_contact"]
     # the lookup's 0 N end: its last segment (2 N at 1e4, 0.5 N at 1e5) extended to 1e5 * 10^(1/3)
-    assert LOOKUP.unloaded_conductance_s == pytest.approx(1 / (1e5 * 10 ** (1 / 3)))
-    g_lookup = 1.0 / 1e4 + 1.0 / 2e5 - LOOKUP.unloaded_conductance_s
+    assert 1.0 / LOOKUP.unloaded_resistance_ohm == pytest.approx(1 / (1e5 * 10 ** (1 / 3)))
+    g_lookup = 1.0 / 1e4 + 1.0 / 2e5 - 1.0 / LOOKUP.unloaded_resistance_ohm
     raw = RawSample(resistance_ohm=np.array([loaded, 1.0 / g_lookup]))
     snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
     assert snap.force_n[0] == pytest.approx(3.0, rel=1e-9)
@@ -253,22 +261,22 @@ def test_a_changed_conversion_does_not_carry_creep_state() -> None:
 @pytest.mark.parametrize(
     ("build", "key", "allowed"),
     [
-        (lambda: LineConversion(0.0, N, 0.05, 10.0), "slope_s_per_n", "(0, inf) S/N"),
-        (lambda: LineConversion(-M, N, 0.05, 10.0), "slope_s_per_n", "(0, inf) S/N"),
-        (lambda: LineConversion(math.nan, N, 0.05, 10.0), "slope_s_per_n", "finite"),
-        (lambda: LineConversion(M, math.inf, 0.05, 10.0), "intercept_s", "finite"),
-        (lambda: LineConversion(M, N, 0.0, 10.0), "force_min_n", "(0, inf) N"),
-        (lambda: LineConversion(M, N, 5.0, 5.0), "force_max_n", "(force_min_n = 5.0, inf) N"),
-        (lambda: LineConversion(M, -2e-5, 0.5, 10.0), "force_min_n", "zero conductance at 1 N"),
-        (lambda: LookupConversion((1e3,), (1.0,)), "resistance_ohm", "at least 2 points"),
-        (lambda: LookupConversion((1e3, 1e4), (1.0, 0.5, 0.2)), "force_n", "one per resistance"),
-        (lambda: LookupConversion((1e3, 1e3), (2.0, 1.0)), "resistance_ohm[1]", "strictly increasing"),
-        (lambda: LookupConversion((1e4, 1e3), (2.0, 1.0)), "resistance_ohm[1]", "strictly increasing"),
-        (lambda: LookupConversion((0.0, 1e3), (2.0, 1.0)), "resistance_ohm[0]", "(0, inf) ohm"),
-        (lambda: LookupConversion((1e3, 1e4), (1.0, 2.0)), "force_n[1]", "non-increasing"),
-        (lambda: LookupConversion((1e3, 1e4), (1.0, 1.0)), "force_n", "force range"),
-        (lambda: LookupConversion((1e3, math.inf), (2.0, 1.0)), "resistance_ohm[1]", "finite"),
-        (lambda: LookupConversion((1e3, 1e4), (2.0, math.nan)), "force_n[1]", "finite"),
+        (lambda: line_conversion(0.0, N, 0.05, 10.0), "slope_s_per_n", "(0, inf) S/N"),
+        (lambda: line_conversion(-M, N, 0.05, 10.0), "slope_s_per_n", "(0, inf) S/N"),
+        (lambda: line_conversion(math.nan, N, 0.05, 10.0), "slope_s_per_n", "finite"),
+        (lambda: line_conversion(M, math.inf, 0.05, 10.0), "intercept_s", "finite"),
+        (lambda: line_conversion(M, N, 0.0, 10.0), "force_min_n", "(0, inf) N"),
+        (lambda: line_conversion(M, N, 5.0, 5.0), "force_max_n", "(force_min_n = 5.0, inf] N"),
+        (lambda: line_conversion(M, -2e-5, 0.5, 10.0), "force_min_n", "zero conductance at 1 N"),
+        (lambda: lookup_conversion((1e3,), (1.0,)), "resistance_ohm", "at least 2 points"),
+        (lambda: lookup_conversion((1e3, 1e4), (1.0, 0.5, 0.2)), "force_n", "one per resistance"),
+        (lambda: lookup_conversion((1e3, 1e3), (2.0, 1.0)), "resistance_ohm[1]", "strictly increasing"),
+        (lambda: lookup_conversion((1e4, 1e3), (2.0, 1.0)), "resistance_ohm[1]", "strictly increasing"),
+        (lambda: lookup_conversion((0.0, 1e3), (2.0, 1.0)), "resistance_ohm[0]", "(0, inf) ohm"),
+        (lambda: lookup_conversion((1e3, 1e4), (1.0, 2.0)), "force_n[1]", "non-increasing"),
+        (lambda: lookup_conversion((1e3, 1e4), (1.0, 1.0)), "force_n", "force range"),
+        (lambda: lookup_conversion((1e3, math.inf), (2.0, 1.0)), "resistance_ohm[1]", "finite"),
+        (lambda: lookup_conversion((1e3, 1e4), (2.0, math.nan)), "force_n[1]", "finite"),
     ],
 )
 def test_conversions_refuse_values_outside_their_ranges(build: object, key: str, allowed: str) -> None:
@@ -280,7 +288,7 @@ def test_conversions_refuse_values_outside_their_ranges(build: object, key: str,
 
 def test_a_channel_refuses_something_that_is_not_a_conversion() -> None:
     with pytest.raises(
-        ConfigError, match="conversion: expected None, LineConversion, LookupConversion or CurveChannel"
+        ConfigError, match="conversion: expected None or a CurveChannel"
     ):
         ChannelConfig(0, "ch00", 0.0, 0.0, True, PAPER_EFFECTS, SensorParams(), None, (M, N))  # type: ignore[arg-type]
 
@@ -289,8 +297,7 @@ def test_a_line_with_a_negative_intercept_reads_no_contact_at_rest() -> None:
     """C = m F + n with n < 0 (the paper's staircase line: n = -1.79e-5 S): with force_min_n
     above -n/m = 1 N, an open sensor and a nearly open one (10 Mohm) read 0 N no contact, and a
     loaded one reads (1/R - n)/m."""
-    line = LineConversion(slope_s_per_n=M, intercept_s=-2e-5, force_min_n=1.1, force_max_n=10.0)
-    conv = ConversionSet([line])
+    line = line_conversion(slope_s_per_n=M, intercept_s=-2e-5, force_min_n=1.1, force_max_n=10.0)
     r = np.array([math.inf])
     for resistance, force, code in (
         (math.inf, 0.0, ForceStatus.NO_CONTACT),
@@ -299,5 +306,5 @@ def test_a_line_with_a_negative_intercept_reads_no_contact_at_rest() -> None:
     ):
         r[0] = resistance
         f, status = np.zeros(1), np.zeros(1, dtype=np.int8)
-        conv.apply(r, f, status)
+        _apply([line], r, f, status)
         assert f[0] == pytest.approx(force) and status[0] == code, resistance

@@ -15,7 +15,7 @@ from gateway.config.layout import GridLayout
 from gateway.errors import ConfigError
 from gateway.modbus.image import RawSample
 from gateway.model import PAPER_EFFECTS, Divider, SensorModel, SensorParams
-from gateway.model.conversion import Conversion, LineConversion
+from gateway.model.conversion import Conversion, line_conversion
 from gateway.model.curves import CurveChannel, Drift, LineCurve, LookupCurve, PowerLawCurve
 from gateway.runtime.processor import DeviceProcessor, DeviceState
 from gateway.runtime.snapshot import ChannelStatus, DeviceSnapshot
@@ -23,7 +23,7 @@ from gateway.runtime.snapshot import ChannelStatus, DeviceSnapshot
 K, N = 1e-4, 0.8  # G = k F^n
 A1, TAU = 0.2, 5.0
 CREEP = CurveChannel(PowerLawCurve(K, N), Drift(creep_fraction=A1, creep_tau_s=TAU))
-LINE = LineConversion(slope_s_per_n=2e-5, intercept_s=1e-6, force_min_n=0.05, force_max_n=10.0)
+LINE = line_conversion(slope_s_per_n=2e-5, intercept_s=1e-6, force_min_n=0.05, force_max_n=10.0)
 
 
 def make_device(
@@ -91,7 +91,7 @@ def labels(snap: DeviceSnapshot) -> list[str]:
 def test_a_held_step_reads_the_applied_force_while_the_static_one_creeps() -> None:
     proc = DeviceProcessor(make_device([CREEP]), "bus", 0.1)
     times = [0.0, 0.1, 0.5, 1.0, 2.0, 5.0, 10.0, 30.0, 60.0]
-    snaps, state = feed(proc, proc.initial_state(), [[r_power(crept(2.0, t))] for t in times], times)
+    snaps, state = feed(proc, proc.rested_state(), [[r_power(crept(2.0, t))] for t in times], times)
     for snap, t in zip(snaps, times, strict=True):
         assert labels(snap) == ["ok"]
         assert snap.force_n[0] == pytest.approx(2.0, rel=1e-12)
@@ -109,9 +109,8 @@ def test_mixed_device_physics_line_and_curve_each_read_right() -> None:
     r_line = 1.0 / (2e-5 * 3.0 + 1e-6)  # 3 N on the line
     mixed = DeviceProcessor(make_device([None, LINE, CREEP, None]), "bus", 0.1)
     plain = DeviceProcessor(make_device([None, None]), "bus", 0.1)
-    assert mixed.curves is not None and mixed.curves.positions.tolist() == [2]
-    assert mixed.conversions is not None and mixed.conversions.positions.tolist() == [1]
-    sm, sp = mixed.initial_state(), plain.initial_state()
+    assert mixed.curves is not None and mixed.curves.positions.tolist() == [1, 2]
+    sm, sp = mixed.rested_state(), plain.rested_state()
     for k, t in enumerate([0.0, 1.0, 5.0, 30.0]):
         phys = [r_phys * (1.0 - 0.01 * k), r_phys * 1.2]
         snap_m, sm = mixed.process(
@@ -141,12 +140,12 @@ def test_statuses_of_curve_channels() -> None:
         0.0: "short",
     }
     for r, label in bad.items():
-        snap, _ = proc.process(proc.initial_state(), RawSample(resistance_ohm=np.full(3, r)), 0.0, 0.0)
+        snap, _ = proc.process(proc.rested_state(), RawSample(resistance_ohm=np.full(3, r)), 0.0, 0.0)
         assert labels(snap) == [label] * 3, r
         assert np.isnan(snap.force_n).all() and snap.total_force_n == 0.0
     # the line below its intercept and the lookup beyond its last knot read <= 0 N: no contact
     rs = np.array([r_power(1.0), 1.0 / 0.5e-6, 1e5])
-    snap, _ = proc.process(proc.initial_state(), RawSample(resistance_ohm=rs), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(resistance_ohm=rs), 0.0, 0.0)
     assert labels(snap) == ["ok", "no_contact", "no_contact"]
     np.testing.assert_allclose(snap.force_n, [1.0, 0.0, 0.0], rtol=1e-12)
     assert snap.channels_in_contact == 1
@@ -157,10 +156,10 @@ def test_open_at_rest_with_fault_bitmaps_reads_no_contact() -> None:
     open sensor at rest: 0 N, no contact (as for a physics channel), never a force > 0."""
     # n = 2: a conductance of 1 / 1.8e308 ohm would read (5.6e-305)^(1/2) = 7.5e-153 N > 0,
     # and an offset 0.2 N more: neither is a load
-    square = CurveChannel(PowerLawCurve(1e-4, 2.0), offset_n=0.2)
+    square = CurveChannel(PowerLawCurve(1e-4, 2.0), offset_n=0.2, force_min_n=0.5)
     proc = DeviceProcessor(make_device([square, CREEP, CREEP, None]), "bus", 0.1)
     raw = RawSample(resistance_ohm=np.full(4, math.inf), open_bits=np.array([False, False, True, False]))
-    snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), raw, 0.0, 0.0)
     assert labels(snap) == ["no_contact", "no_contact", "open", "no_contact"]
     assert snap.force_n[0] == 0.0 and snap.force_n[1] == 0.0
     assert snap.channels_in_contact == 0 and snap.total_force_n == 0.0
@@ -169,7 +168,7 @@ def test_open_at_rest_with_fault_bitmaps_reads_no_contact() -> None:
 def test_an_invalid_sample_keeps_the_curve_state_and_the_next_one_reads_right() -> None:
     proc = DeviceProcessor(make_device([CREEP]), "bus", 0.1)
     rows = [[r_power(crept(2.0, 0.0))], [math.nan], [r_power(crept(2.0, 3.0))]]
-    snaps, _ = feed(proc, proc.initial_state(), rows, [0.0, 1.0, 3.0])
+    snaps, _ = feed(proc, proc.rested_state(), rows, [0.0, 1.0, 3.0])
     assert [labels(s)[0] for s in snaps] == ["ok", "error", "ok"]
     assert snaps[2].force_n[0] == pytest.approx(2.0, rel=1e-12)
 
@@ -179,7 +178,7 @@ def test_carry_state_keeps_the_curve_state_only_while_the_curves_are_unchanged()
     old = DeviceProcessor(dev, "bus", 0.1)
     times = [0.0, 1.0, 2.0, 4.0]
     rows = [[1e5, r_power(crept(2.0, t))] for t in times]
-    _, state = feed(old, old.initial_state(), rows, times)
+    _, state = feed(old, old.rested_state(), rows, times)
     assert state.curve_state is not None and state.curve_state.z1[0] > 0.0
 
     # a reload with the same configuration: the drift state carries over, the force stays F
@@ -195,13 +194,14 @@ def test_carry_state_keeps_the_curve_state_only_while_the_curves_are_unchanged()
     )
     assert other.carry_state(old, state).curve_state is state.curve_state
 
-    # the curve changed: its state starts relaxed, so the first sample reads the static force
+    # the curve changed: its state is not known, so the first sample reads the equilibrium at
+    # its load: the static force over 1 + a
     changed = CurveChannel(PowerLawCurve(K, N), Drift(creep_fraction=0.1, creep_tau_s=TAU))
     new = DeviceProcessor(make_device([None, changed]), "bus", 0.1)
     fresh = new.carry_state(old, state)
     assert fresh.curve_state is None
     snaps, _ = feed(new, fresh, [[1e5, r_power(crept(2.0, 10.0))]], [10.0])
-    assert snaps[0].force_n[1] == pytest.approx(crept(2.0, 10.0), rel=1e-12)
+    assert snaps[0].force_n[1] == pytest.approx(crept(2.0, 10.0) / 1.1, rel=1e-12)
 
 
 # ---------------------------------------------------------------- calibration files
@@ -256,7 +256,7 @@ def test_a_curve_table_gives_the_channel_its_curve_and_the_runtime_tracks_it(tmp
     assert dev.channel("ch01").conversion is None
     proc = DeviceProcessor(dev, "bench", 0.1)
     fe = dev.front_end
-    state = proc.initial_state()
+    state = proc.rested_state()
     r_phys = float(
         SensorModel(dev.channel("ch01").effects, [dev.channel("ch01").params]).resistance(np.array([2.0]))[0]
     )
@@ -289,7 +289,7 @@ def test_a_curve_table_gives_the_channel_its_curve_and_the_runtime_tracks_it(tmp
         (
             '[curve."tip"]\nkind = "lookup"\nresistance_ohm = [1e3, 1e3]\nforce_n = [2, 1]\n',
             "curve.tip.resistance_ohm[1]",
-            "must increase",
+            "strictly increasing",
         ),
         ('[curve."tpi"]\nkind = "line"\n', "curve.tpi", "did you mean 'tip'?"),
         (

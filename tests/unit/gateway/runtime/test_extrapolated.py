@@ -135,7 +135,7 @@ def test_held_loads_outside_the_calibrated_range_read_as_forces_flagged_extrapol
     proc = DeviceProcessor(dev, "bench", 0.1)
     t, f = _loads()
     r = resistance(t, f)
-    state = proc.initial_state()
+    state = proc.rested_state()  # the bench starts unloaded
     statuses: dict[float, set[str]] = {load: set() for load in HOLDS}
     forces: dict[float, list[float]] = {load: [] for load in HOLDS}
     for k in range(t.size):
@@ -167,7 +167,7 @@ def test_a_line_lookup_or_curve_flags_outside_its_own_range_without_the_channel_
     loads = np.array([0.3, 2.0, 8.0])
     t = np.arange(loads.size) * HOLD_S
     r = resistance(t, loads)
-    state = proc.initial_state()
+    state = proc.rested_state()  # the bench starts unloaded
     for k in range(loads.size):
         snap, state = proc.process(state, RawSample(resistance_ohm=r[k : k + 1]), 1e9 + t[k], t[k])
         assert ChannelStatus(int(snap.status[0])).label == EXPECTED[k]
@@ -182,7 +182,7 @@ def test_a_calibration_file_without_the_calibrated_range_reads_as_before(tmp_pat
     proc = DeviceProcessor(dev, "bench", 0.1)
     t, f = _loads()
     r = _physics_ohm(t, f)
-    state = proc.initial_state()
+    state = proc.rested_state()  # the bench starts unloaded
     seen: dict[float, set[tuple[str, float]]] = {load: set() for load in HOLDS}
     for k in range(t.size):
         snap, state = proc.process(

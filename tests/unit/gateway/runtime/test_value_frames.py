@@ -159,17 +159,19 @@ drift = { creep_fraction = 0.2, creep_tau_s = 10.0 }
     held_n, a, tau, dt = 2.0, 0.2, 10.0, 1.0
     z = 0.0
     forces = []
-    for k in range(30):
-        if k:
+    # the device starts unloaded (the gateway reads its first sample at rest), then holds F
+    for k in range(-1, 30):
+        if k > 0:
             e = math.exp(-dt / tau)
             z = e * z + (1.0 - e) * a * held_n
-        reading = held_n + z  # what the device's own table reports, creeping up
+        reading = held_n + z if k >= 0 else 0.0  # what the device's own table reports, creeping up
         words: list[int] = []
         for _ in range(4):
             words += list(struct.unpack(">HH", struct.pack(">f", reading)))
         dev.set_input(0, words)
         snap = await poll(poller)
-        forces.append(float(snap.force_n[0]))
+        if k >= 0:
+            forces.append(float(snap.force_n[0]))
         clock.now_s += dt
     assert z > 0.3  # the reading crept up by more than 15 % ...
     assert max(abs(f - held_n) for f in forces) < 1e-6  # ... and the force stayed flat

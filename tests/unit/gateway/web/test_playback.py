@@ -17,7 +17,7 @@ from gateway.cli.view_cmd import record_snapshots
 from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
 from gateway.config.layout import GridLayout
 from gateway.model import PAPER_EFFECTS, Divider, SensorParams
-from gateway.model.conversion import LineConversion
+from gateway.model.conversion import line_conversion
 from gateway.web.playback import PlaybackPage, playback_frames, thin
 
 M, N = 2e-5, 1e-6  # conductance (S) = M * force (N) + N
@@ -25,7 +25,7 @@ PITCH_MM = 2.5
 
 
 def line_device(n_channels: int = 4, columns: int = 2) -> DeviceConfig:
-    line = LineConversion(M, N, 0.01, 50.0)
+    line = line_conversion(M, N, 0.01, 50.0)
     channels = tuple(
         ChannelConfig(k, f"ch{k:02d}", (k % columns) * PITCH_MM, (k // columns) * PITCH_MM, True,
                       PAPER_EFFECTS, SensorParams(), None, line)
