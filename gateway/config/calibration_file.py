@@ -8,9 +8,9 @@ else).
 
 ``tactile-gateway apply`` replays a record through the runtime with a calibration file and no
 gateway configuration. It needs the channels the file configures and a device whose channels
-get their parameters, unloaded baselines and line or lookup tables from the file; both come
-from the functions ``[[bus.device]] calibration = "..."`` goes through (``load_calibration``,
-``device.parse_device``), nothing here reads a value itself.
+get their parameters, effects (``[meta] effects``), unloaded baselines and line or lookup tables
+from the file; both come from the functions ``[[bus.device]] calibration = "..."`` goes through
+(``load_calibration``, ``device.parse_device``), nothing here reads a value itself.
 
 The device (``calibrated_device``) reports float32 resistances (ohm) and fault bitmaps, and
 names a 64-bit device clock, so that a caller can pass each sample's time as the device's
@@ -25,7 +25,6 @@ from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
-from ..model.effects import PAPER_EFFECTS
 from .calibration_format import (
     CALIBRATED_RANGE_KEYS,
     CALIBRATION_TABLES,
@@ -104,9 +103,11 @@ def _note(file: Path) -> str:
 
 
 def _device(
-    file: Path, listed: Sequence[str], enabled: Collection[str], name: str, effects: Sequence[str]
+    file: Path, listed: Sequence[str], enabled: Collection[str], name: str, effects: Sequence[str] | None
 ) -> DeviceConfig:
-    """The ``[[bus.device]]`` table naming ``file``, through ``parse_device``."""
+    """The ``[[bus.device]]`` table naming ``file``, through ``parse_device``; with ``effects``
+    its ``[bus.device.model] effects`` (None: the default, so that a calibrated channel takes
+    the calibration's, as in a device that names none)."""
     if len(listed) > MAX_CHANNELS:
         raise ConfigError(f"{file}: {len(listed)} channels; a device has at most {MAX_CHANNELS}")
     for channel in listed:
@@ -123,7 +124,7 @@ def _device(
         "registers": {"float_address": _FLOAT_ADDRESS, "status_address": _STATUS_ADDRESS},
         "clock": {"address": _CLOCK_ADDRESS, "registers": 4, "tick_s": CALIBRATED_DEVICE_CLOCK_TICK_S},
         "calibration": str(file),
-        "model": {"effects": list(effects)},
+        **({} if effects is None else {"model": {"effects": list(effects)}}),
         "channel": [{"index": i, "name": c, "enabled": c in enabled} for i, c in enumerate(listed)],
     }
     try:
@@ -140,14 +141,15 @@ def calibration_channels(file: Path) -> tuple[str, ...]:
     file = _absolute(file)
     names = load_calibration(file).channel_names()  # the tables' own checks
     if names:  # then what parse_device checks of them (lines, merged ranges)
-        _device(file, list(names), set(names), "calibration", PAPER_EFFECTS)
+        _device(file, list(names), set(names), "calibration", None)
     return names
 
 
 def calibration_effects(file: Path) -> tuple[str, ...] | None:
     """The effects the calibration was fitted with (``[meta] effects``, written by
-    ``calibrate``), or None when the file does not say. The gateway does not read them: a
-    device's effects are its ``[bus.device.model] effects`` (default: the paper's)."""
+    ``calibrate``), or None when the file does not say. The gateway reads a calibrated channel
+    (one with a ``[channel.<name>]`` table, read by the physical model) with them; a file
+    without them leaves the device's effects (``[bus.device.model] effects``)."""
     return load_calibration(_absolute(file)).effects
 
 
@@ -157,12 +159,15 @@ def calibrated_device(
     *,
     others: Collection[str] = (),
     name: str = "record",
-    effects: Sequence[str] = PAPER_EFFECTS,
+    effects: Sequence[str] | None = None,
 ) -> DeviceConfig:
     """A float32 (ohm) device whose enabled channels are ``channels`` (in this order, indices
     0, 1, ...), read with calibration ``file`` exactly as a ``[[bus.device]]`` that names it:
     each channel's parameters are the defaults merged with its ``[channel.<name>]`` table, its
-    baseline the table's ``baseline_ohm``, its conversion its ``[line]`` / ``[lookup]`` table.
+    effects the file's ``[meta] effects`` (a file without them, and a channel without a table:
+    ``effects``, default the paper's), its baseline the table's ``baseline_ohm``, its
+    conversion its ``[line]`` / ``[lookup]`` table. ``effects`` that differ from the file's are
+    the device's ``[bus.device.model] effects`` contradicting it: ``ConfigError``.
 
     ``others`` are further channels the file has tables for: they are in the device, disabled
     (the gateway refuses a calibration table that names no channel of the device). The device

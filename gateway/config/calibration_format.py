@@ -28,6 +28,7 @@ from tomlkit.items import KeyType, SingleKey, Table
 
 from ..errors import ConfigError
 from ..model.conversion import CONVERSION_KINDS
+from ..model.effects import EFFECT_NAMES, UnknownEffectError, parse_effects
 from .tables import Context, join_key, parse_toml, read_text_file, show_value, suggest, type_name
 
 __all__ = [
@@ -101,8 +102,10 @@ class ConversionTable:
 @dataclass(frozen=True)
 class CalibrationFile:
     """A calibration file as a value. ``record`` and ``effects`` are its ``[meta]`` table (None:
-    not given); ``channels`` its ``[channel.<name>]`` tables and ``conversions`` its line,
-    lookup and curve tables, by channel name. ``header`` (comment lines at the top of the file)
+    not given; ``effects`` as read back are in canonical order, ``model.effects.parse_effects``,
+    and the gateway reads the calibrated channels with them); ``channels`` its
+    ``[channel.<name>]`` tables and ``conversions`` its line, lookup and curve tables, by
+    channel name. ``header`` (comment lines at the top of the file)
     and ``meta_comments`` (after the ``[meta]`` keys) are written, not read back."""
 
     channels: Mapping[str, ChannelCalibration] = field(default_factory=dict)
@@ -289,15 +292,29 @@ def _from_data(
     conversions = _conversion_tables(cal_ctx, data, channel_names)
     meta = data.get("meta")
     meta = meta if isinstance(meta, dict) else {}  # the gateway reads nothing else of [meta]
-    record, effects = meta.get("record"), meta.get("effects")
-    if not (isinstance(effects, list) and all(isinstance(e, str) for e in effects)):
-        effects = None
-    return CalibrationFile(
-        channels,
-        conversions,
-        record if isinstance(record, str) else None,
-        None if effects is None else tuple(effects),
-    )
+    record = meta.get("record")
+    effects = _effects(cal_ctx, meta["effects"]) if "effects" in meta else None
+    return CalibrationFile(channels, conversions, record if isinstance(record, str) else None, effects)
+
+
+def _effects(cal_ctx: Context, value: object) -> tuple[str, ...]:
+    """``[meta] effects``: the effects the channels were fitted with, which the gateway reads
+    them with; an array of effect names, returned in canonical order (``parse_effects``)."""
+    expected = f"an array of effect names ({', '.join(EFFECT_NAMES)})"
+    if not isinstance(value, list):
+        raise cal_ctx.error(
+            "meta.effects", f"expected {expected}, got {type_name(value)} {show_value(value)}"
+        )
+    for i, item in enumerate(value):
+        if not isinstance(item, str):
+            raise cal_ctx.error(
+                f"meta.effects[{i}]", f"expected an effect name, got {type_name(item)} {show_value(item)}"
+            )
+        try:
+            parse_effects([item])
+        except UnknownEffectError as exc:
+            raise cal_ctx.error(f"meta.effects[{i}]", str(exc)) from None
+    return parse_effects(value)
 
 
 def read_toml(file: Path) -> dict[str, Any]:

@@ -7,8 +7,10 @@ table; nothing is read that neither names (no implicit clock, no implicit status
 named), its position (from the ``layout``, mm, unless given), its unloaded baseline, its
 effects and its sensor parameters, merged in this order: the defaults
 (``docs/parameters.md``), the device's ``[bus.device.model.params]``, the calibration file's
-``[channel.<name>]`` table, the channel entry's ``params``. Every message names the file and
-the key path.
+``[channel.<name>]`` table, the channel entry's ``params``. A calibrated channel is read with
+the calibration's values and effects: a configuration key that contradicts them is an error
+unless the configuration says it overrides them (``overrides``). Every message names the file
+and the key path.
 """
 
 from __future__ import annotations
@@ -24,7 +26,17 @@ from ..model.conversion import Conversion, ConversionError, conversion_from_tabl
 from ..model.curves import DRIFT_KEYS, CurveError, Drift
 from ..model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
 from ..model.params import PARAMETER_RANGES, ParameterError, SensorParams, parameter_names
-from .calibration_format import read_calibration
+from .calibration_format import CalibrationFile, read_calibration
+from .overrides import (
+    DEVICE_OVERRIDE_KEY,
+    EFFECTS,
+    OVERRIDE_KEY,
+    ChannelValues,
+    Contradiction,
+    conflict_error,
+    parse_override_list,
+    resolve_channel,
+)
 from .profiles import load_profile, merge_profile
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS, parse_baselines, parse_divider, parse_front_end, parse_layout
 from .schema import DEVICE_ID, MAX_CHANNELS, POSITION_MM, ChannelConfig, DeviceConfig
@@ -49,7 +61,7 @@ from .wire import (
     parse_setup,
 )
 
-__all__ = ["DEVICE_KEYS", "parse_device"]
+__all__ = ["DEVICE_KEYS", "device_overrides", "parse_device"]
 
 DEVICE_KEYS: Final = (
     "name",
@@ -75,8 +87,8 @@ DEVICE_KEYS: Final = (
     "model",
     "channel",
 )
-_MODEL_KEYS: Final = ("effects", "params")
-_CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params")
+_MODEL_KEYS: Final = ("effects", "params", DEVICE_OVERRIDE_KEY)
+_CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params", OVERRIDE_KEY)
 
 
 def _parse_effects(ctx: Context, path: str, value: object) -> tuple[str, ...]:
@@ -135,20 +147,12 @@ def _conversion(
         raise ConfigError(f"{Context(file).error(where, exc.message)}{note}") from None
 
 
-def _load_calibration(
-    ctx: Context, path: str, file: Path, channel_names: Sequence[str]
-) -> tuple[
-    dict[str, dict[str, float]],
-    dict[str, float],
-    dict[str, tuple[str, dict[str, Any]]],
-    dict[str, tuple[float, float]],
-]:
+def _load_calibration(ctx: Context, path: str, file: Path, channel_names: Sequence[str]) -> CalibrationFile:
     """The calibration file named at ``path`` of ``ctx`` (``calibration_format.read_calibration``):
     per-channel parameter tables ``[channel.<name>]``, the channels' unloaded baselines
-    (``baseline_ohm``), their line, lookup or curve tables (kind, table) and their calibrated
-    force ranges (``calibrated_min_n``/``calibrated_max_n``)."""
-    cal = read_calibration(file, channel_names, _parse_param_overrides, named_at=(ctx, path))
-    return cal.params(), cal.baselines(), cal.conversion_tables(), cal.calibrated_ranges()
+    (``baseline_ohm``), their line, lookup or curve tables (kind, table), their calibrated
+    force ranges (``calibrated_min_n``/``calibrated_max_n``) and the effects (``[meta]``)."""
+    return read_calibration(file, channel_names, _parse_param_overrides, named_at=(ctx, path))
 
 
 def _output_drift(table: Table, frame: ValueFrame | None) -> Drift | None:
@@ -169,6 +173,19 @@ def _output_drift(table: Table, frame: ValueFrame | None) -> Drift | None:
 
 
 def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
+    """The ``[[bus.device]]`` table ``data`` at key path ``path`` of ``ctx``'s file."""
+    return _parse_device(ctx, path, data)[0]
+
+
+def device_overrides(ctx: Context, path: str, data: dict[str, Any]) -> tuple[Contradiction, ...]:
+    """The keys of the ``[[bus.device]]`` table ``data`` that override its calibration, as the
+    table says (``override`` / ``override_calibration``): what ``check-config`` lists."""
+    return _parse_device(ctx, path, data)[1]
+
+
+def _parse_device(
+    ctx: Context, path: str, data: dict[str, Any]
+) -> tuple[DeviceConfig, tuple[Contradiction, ...]]:
     Table(ctx, data, path, DEVICE_KEYS)  # unknown keys of the device's own table
     profile: str | None = None
     if "profile" in data:
@@ -231,9 +248,15 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
     device_params = _parse_param_overrides(
         ctx, model.at("params"), model.raw_table("params", "[bus.device.model.params]")
     )
+    device_override = frozenset[str]()
+    if model.has(DEVICE_OVERRIDE_KEY):
+        own = [*device_params, *([EFFECTS] if model.has("effects") else [])]
+        device_override = parse_override_list(
+            ctx, model.at(DEVICE_OVERRIDE_KEY), model.data[DEVICE_OVERRIDE_KEY], own
+        )
 
     # Per-channel entries, keyed by channel index.
-    entries: dict[int, tuple[Table, dict[str, float]]] = {}
+    entries: dict[int, tuple[Table, dict[str, float], frozenset[str]]] = {}
     entry_paths: dict[int, str] = {}
     for cpath, item in table.tables("channel", "[[bus.device.channel]]"):
         entry = Table(ctx, item, cpath, _CHANNEL_KEYS)
@@ -246,7 +269,11 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         overrides = _parse_param_overrides(
             ctx, entry.at("params"), entry.raw_table("params", "params = {...}")
         )
-        entries[index] = (entry, overrides)
+        override = frozenset[str]()
+        if entry.has(OVERRIDE_KEY):
+            own = [*overrides, *([EFFECTS] if entry.has("effects") else [])]
+            override = parse_override_list(ctx, entry.at(OVERRIDE_KEY), entry.data[OVERRIDE_KEY], own)
+        entries[index] = (entry, overrides, override)
         entry_paths[index] = entry.at("index")
 
     names: list[str] = []
@@ -269,42 +296,60 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         name_owner[channel_name] = (i, where)
         names.append(channel_name)
 
-    calibrated: dict[str, dict[str, float]] = {}
-    calibrated_baselines: dict[str, float] = {}
-    conversions: dict[str, tuple[str, dict[str, Any]]] = {}
-    calibrated_ranges: dict[str, tuple[float, float]] = {}
+    cal = CalibrationFile()
     cal_note = (calibration or Path(), f" (calibration file of {table.at('calibration')} in {ctx.label})")
     if calibration is not None:
-        calibrated, calibrated_baselines, conversions, calibrated_ranges = _load_calibration(
-            ctx, table.at("calibration"), calibration, names
-        )
+        cal = _load_calibration(ctx, table.at("calibration"), calibration, names)
+    calibrated, conversions = cal.params(), cal.conversion_tables()
+    calibrated_baselines, calibrated_ranges = cal.baselines(), cal.calibrated_ranges()
 
     channels: list[ChannelConfig] = []
+    contradictions: list[Contradiction] = []
     for i, channel_name in enumerate(names):
         x_mm, y_mm = layout.position_mm(i)
         enabled = True
-        effects = device_effects
-        merged = dict(device_params)
-        merged.update(calibrated.get(channel_name, {}))
+        entry_table, own_params, own_override = entries.get(i, (None, {}, frozenset[str]()))
+        own_effects = None
         blame = model.at("params")
         source = ["defaults"] + (["config"] if device_params else [])
         if channel_name in calibrated or channel_name in conversions:
             source.append("calibration")
         if channel_name in calibrated:
             blame = f"{table.at('calibration')} [channel.{channel_name}]"
-        if i in entries:
-            entry, overrides = entries[i]
-            x_mm = entry.number("x_mm", x_mm, POSITION_MM, " mm")
-            y_mm = entry.number("y_mm", y_mm, POSITION_MM, " mm")
-            enabled = entry.boolean("enabled", True)
-            if entry.has("effects"):
-                effects = _parse_effects(ctx, entry.at("effects"), entry.data["effects"])
-            merged.update(overrides)
-            if overrides:
-                blame = entry.at("params")
+        if entry_table is not None:
+            x_mm = entry_table.number("x_mm", x_mm, POSITION_MM, " mm")
+            y_mm = entry_table.number("y_mm", y_mm, POSITION_MM, " mm")
+            enabled = entry_table.boolean("enabled", True)
+            if entry_table.has("effects"):
+                own_effects = _parse_effects(ctx, entry_table.at("effects"), entry_table.data["effects"])
+            if own_params:
+                blame = entry_table.at("params")
                 source.append("channel")
+        said = ChannelValues(
+            device_params,
+            model.at("params"),
+            device_effects,
+            model.at("effects") if model.has("effects") else None,
+            device_override,
+            own_params,
+            entry_table.at("params") if entry_table is not None else "",
+            own_effects,
+            entry_table.at("effects") if entry_table is not None else "",
+            own_override,
+        )
+        resolved = resolve_channel(
+            channel_name,
+            i,
+            said,
+            calibrated.get(channel_name),
+            cal.effects,
+            calibration or Path(),
+            channel_name not in conversions,
+        )
+        contradictions.extend(resolved.contradictions)
+        effects = resolved.effects
         try:
-            params = SensorParams(**merged)
+            params = SensorParams(**resolved.params)
         except ParameterError as exc:
             raise ctx.error(blame, f"{exc} (channel {channel_name!r}, index {i})") from None
         baseline = baselines[i] if baselines is not None else calibrated_baselines.get(channel_name)
@@ -343,4 +388,7 @@ def parse_device(ctx: Context, path: str, data: dict[str, Any]) -> DeviceConfig:
         output_drift=output_drift,
     )
     check_overlaps(ctx, path, device)
-    return device
+    refused = [c for c in contradictions if not c.overridden]
+    if refused:
+        raise conflict_error(ctx, path, refused)
+    return device, tuple(c for c in contradictions if c.overridden)

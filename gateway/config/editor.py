@@ -27,6 +27,7 @@ from ..atomic import atomic_write_text
 from ..errors import ConfigError
 from ..keys import check_keys
 from ..model import UnknownEffectError, parameter_names, parse_effects
+from .overrides import DEVICE_OVERRIDE_KEY
 from .parser import parse_config
 from .schema import BusConfig, ChannelConfig, DeviceConfig, GatewayConfig
 from .tables import read_text_file
@@ -42,7 +43,9 @@ __all__ = [
     "find_devices",
     "flag_assignment",
     "parse_assignment",
+    "parse_edited",
     "read_config_text",
+    "write_config",
 ]
 
 #: Channel keys set directly (the rest are sensor parameters, set in ``params``).
@@ -109,6 +112,8 @@ class ParameterSources:
             device_index
         ]
         self.device_keys = list(raw.get("model", {}).get("params", {}))
+        # the device's keys that win over the calibration ([bus.device.model] override_calibration)
+        self.device_wins = set(raw.get("model", {}).get(DEVICE_OVERRIDE_KEY, [])) & set(self.device_keys)
         self.channel_keys: dict[int, list[str]] = {}
         for entry in raw.get("channel", []):
             self.channel_keys[entry["index"]] = list(entry.get("params", {}))
@@ -121,7 +126,8 @@ class ParameterSources:
     def of(self, channel: ChannelConfig) -> dict[str, str]:
         sources = dict.fromkeys(parameter_names(), "default")
         sources.update(dict.fromkeys(self.device_keys, "device"))
-        sources.update(dict.fromkeys(self.calibration.get(channel.name, {}), "calibration"))
+        calibrated = [k for k in self.calibration.get(channel.name, {}) if k not in self.device_wins]
+        sources.update(dict.fromkeys(calibrated, "calibration"))
         sources.update(dict.fromkeys(self.channel_keys.get(channel.index, []), "channel"))
         return sources
 
@@ -287,7 +293,7 @@ def edit_channel(
     document = tomlkit.parse(text)
     _edit_document(document, target, assignments)
     new_text = _before_trailing_comments(tomlkit.dumps(document), target.channel.index)
-    edited = _parse_edit(config_path, new_text)
+    edited = parse_edited(config_path, new_text)
     channel = edited.buses[target.bus_index].devices[target.device_index].channels[target.channel.index]
     wrong = [a.key for a in assignments if not _took_effect(channel, a)]
     if wrong:
@@ -297,11 +303,11 @@ def edit_channel(
     changes = ", ".join(f"{a.key} = {a.item.as_string()}" for a in assignments)
     if new_text == text:
         return EditResult(config_path, target, channel, False, changes)
-    _write(config_path, new_text)
+    write_config(config_path, new_text)
     return EditResult(config_path, target, channel, True, changes)
 
 
-def _parse_edit(config_path: Path, new_text: str) -> GatewayConfig:
+def parse_edited(config_path: Path, new_text: str) -> GatewayConfig:
     """The edited text as a configuration, or ``ConfigError`` saying the file is unchanged."""
     try:
         return parse_config(new_text, source=config_path)
@@ -341,7 +347,9 @@ def _before_trailing_comments(text: str, index: int) -> str:
     return "\n".join(moved)
 
 
-def _write(config_path: Path, new_text: str) -> None:
+def write_config(config_path: Path, new_text: str) -> None:
+    """Replace the configuration file with ``new_text`` atomically (``ConfigError`` for a
+    read-only file or a failed write, the file unchanged)."""
     try:
         mode = config_path.stat().st_mode
     except OSError:
@@ -418,6 +426,6 @@ def set_device_array(
     else:
         table.add(key, array)  # tomlkit puts a plain key before the device's sub-tables
     new_text = tomlkit.dumps(document)
-    edited = _parse_edit(config_path, new_text)
-    _write(config_path, new_text)
+    edited = parse_edited(config_path, new_text)
+    write_config(config_path, new_text)
     return edited.buses[b].devices[d]

@@ -23,6 +23,7 @@ from gateway.config.calibration_file import (
 from gateway.config.tables import Context
 from gateway.errors import ConfigError
 from gateway.model.conversion import CONVERSION_KINDS
+from gateway.model.effects import EFFECT_NAMES, parse_effects
 from gateway.model.params import PARAMETER_RANGES
 
 #: Text a record path or channel name may hold: quotes, backslashes, newlines, control and
@@ -75,7 +76,8 @@ FILES = st.builds(
     st.dictionaries(NAMES, CHANNELS, max_size=3),
     st.dictionaries(NAMES, CONVERSIONS, max_size=3),
     st.none() | NAMES,
-    st.none() | st.lists(NAMES, max_size=3).map(tuple),
+    # [meta] effects as the reader gives them back: valid names, canonical order
+    st.none() | st.lists(st.sampled_from(EFFECT_NAMES), max_size=4).map(parse_effects),
     st.lists(NAMES, max_size=2).map(tuple),
     st.lists(NAMES, max_size=2).map(tuple),
 )

@@ -132,6 +132,10 @@ params = { r0_ohm = 190000.0 }
 
 
 def test_parameter_precedence_device_calibration_channel(tmp_path: Path) -> None:
+    # Keys that do not contradict: the device's e1_pa, the calibration's r0_ohm, the channel's
+    # own e0_pa (it overrides the calibration's, as its entry says). A key the config and the
+    # calibration both set to different values without an override is refused
+    # (test_calibration_overrides.py).
     (tmp_path / "cal.toml").write_text(
         "[meta]\nnote = 'fit of 2025-01-31'\n\n[channel.tip]\nr0_ohm = 180000.0\ne0_pa = 14e6\n\n"
         "[channel.ch02]\nr0_ohm = 170000.0\n"
@@ -139,16 +143,17 @@ def test_parameter_precedence_device_calibration_channel(tmp_path: Path) -> None
     config_file = tmp_path / "gateway.toml"
     config_file.write_text(
         with_device(
-            'calibration = "cal.toml"\n[bus.device.model.params]\nr0_ohm = 150000.0\ne1_pa = 2e8\n'
+            'calibration = "cal.toml"\n[bus.device.model.params]\ne1_pa = 2e8\n'
             '[[bus.device.channel]]\nindex = 0\nname = "tip"\nparams = { e0_pa = 16e6 }\n'
+            'override = ["e0_pa"]\n'
         )
     )
     dev = load_config(config_file).buses[0].devices[0]
     assert dev.calibration == tmp_path / "cal.toml"
     tip = dev.channel("tip").params
     assert (tip.r0_ohm, tip.e0_pa, tip.e1_pa) == (180000.0, 16e6, 2e8)  # calibration, channel, device
-    assert dev.channel("ch02").params.r0_ohm == 170000.0
-    assert dev.channel("ch01").params.r0_ohm == 150000.0
+    assert (dev.channel("ch02").params.r0_ohm, dev.channel("ch02").params.e1_pa) == (170000.0, 2e8)
+    assert dev.channel("ch01").params == SensorParams(e1_pa=2e8)
 
 
 def test_calibration_errors_name_the_calibration_file(tmp_path: Path) -> None:
