@@ -1,0 +1,158 @@
+"""Parameters of the emulated FSR and its bench (``sim_device.fsr_emulator``), with their checks.
+
+Every parameter and its physics is described in the docstring of ``sim_device.fsr_emulator``;
+names carry their units (``k_s`` S, ``tau_fast_s`` s, ``threshold_n`` N).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def require(ok: bool, message: str) -> None:
+    """Raise ``ValueError(message)`` unless ``ok``: bad input gets a sentence, not a traceback."""
+    if not ok:
+        raise ValueError(message)
+
+
+def require_finite(value: float, name: str, *, low: float | None = None, strict: bool = False) -> None:
+    """``value`` must be finite and at or above ``low`` (above it when ``strict``)."""
+    require(math.isfinite(value), f"{name} must be finite, got {value!r}")
+    if low is not None:
+        bad = value <= low if strict else value < low
+        require(not bad, f"{name} must be {'>' if strict else '>='} {low:g}, got {value!r}")
+
+
+_POSITIVE: tuple[str, ...] = (
+    "k_s",
+    "exponent",
+    "tau_fast_s",
+    "tau_slow_s",
+    "internal_step_s",
+    "full_scale_n",
+)
+_POSITIVE += ("humidity_period_s", "ohmmeter_min_range_ohm", "gain_max_ratio")
+_NON_NEGATIVE: tuple[str, ...] = ("threshold_n", "a_fast", "a_slow", "hysteresis_amplitude", "gain_sigma")
+_NON_NEGATIVE += ("exponent_sigma", "lead_ohm", "ohmmeter_noise_rel", "load_cell_noise_n")
+_NON_NEGATIVE += ("load_cell_offset_sigma_n", "load_cell_resolution_n", "jitter_fraction")
+
+
+@dataclass(frozen=True)
+class FsrParams:
+    """Every parameter of the emulated sensor and bench (see the module docstring)."""
+
+    # 1. static curve
+    k_s: float = 5e-5  # conductance at F_eff = 1 N, S (k in S/N^n)
+    exponent: float = 0.8  # n, dimensionless
+    threshold_n: float = 0.05  # at or below: open circuit
+    leakage_ohm: float = math.inf  # in parallel, at every force
+    # 2. creep (Burgers-like)
+    a_fast: float = 0.06
+    tau_fast_s: float = 5.0
+    a_slow: float = 0.06
+    tau_slow_s: float = 100.0
+    eta_flow_s: float = 2.0e4  # flow grows at F / eta while loaded (inf: no flow)
+    tau_recovery_s: float = 200.0  # flow recovery time constant while unloaded
+    # 3. hysteresis
+    hysteresis_amplitude: float = 0.07  # A: +-A at mid-range
+    hysteresis_widths_n: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)  # play half-widths
+    hysteresis_weights: tuple[float, ...] | None = None  # None: equal; normalised to sum 1
+    # 4. run-to-run sensitivity
+    gain_sigma: float = 0.15  # sigma of ln(gain)
+    gain_max_ratio: float = 2.0  # gains of any two runs differ by at most this factor
+    exponent_sigma: float = 0.02
+    # 5. ohmmeter
+    lead_ohm: float = 1.0
+    ohmmeter_noise_rel: float = 0.005
+    ohmmeter_counts: int = 20000  # 0: ideal meter
+    ohmmeter_min_range_ohm: float = 200.0
+    ohmmeter_max_range_ohm: float = 20e6
+    # 6. load cell
+    load_cell_noise_n: float = 0.02
+    load_cell_offset_sigma_n: float = 0.03
+    load_cell_resolution_n: float = 0.001  # 0: unrounded
+    # 7. sampling
+    jitter_fraction: float = 0.2
+    internal_step_s: float = 0.01
+    # 8. out-of-catalogue effects (off by default)
+    wear_per_cycle: float = 0.0
+    rate_gain_s: float = 0.0
+    full_scale_n: float = 50.0
+    humidity: float = 0.0
+    humidity_period_s: float = 300.0
+
+    def __post_init__(self) -> None:
+        for name in _POSITIVE:
+            require_finite(getattr(self, name), name, low=0.0, strict=True)
+        for name in _NON_NEGATIVE:
+            require_finite(getattr(self, name), name, low=0.0)
+        for name in ("wear_per_cycle", "rate_gain_s", "humidity"):
+            require_finite(getattr(self, name), name)
+        for name in ("leakage_ohm", "eta_flow_s", "tau_recovery_s"):
+            value = getattr(self, name)
+            require(value > 0 and not math.isnan(value), f"{name} must be > 0 (inf allowed), got {value!r}")
+        require(self.gain_max_ratio >= 1.0, f"gain_max_ratio must be >= 1, got {self.gain_max_ratio!r}")
+        require(self.hysteresis_amplitude < 1.0, "hysteresis_amplitude must be < 1")
+        require(self.jitter_fraction < 1.0, "jitter_fraction must be < 1 (time must increase)")
+        require(0.0 <= self.wear_per_cycle < 1.0, "wear_per_cycle must be in [0, 1)")
+        require(abs(self.humidity) < 1.0, "humidity must be in (-1, 1)")
+        require(self.ohmmeter_counts >= 0, "ohmmeter_counts must be >= 0 (0: ideal meter)")
+        require(
+            self.ohmmeter_max_range_ohm >= self.ohmmeter_min_range_ohm,
+            "ohmmeter_max_range_ohm must be >= ohmmeter_min_range_ohm",
+        )
+        require(len(self.hysteresis_widths_n) > 0, "hysteresis_widths_n must not be empty")
+        for r in self.hysteresis_widths_n:
+            require_finite(r, "hysteresis_widths_n", low=0.0, strict=True)
+        if self.hysteresis_weights is not None:
+            require(
+                len(self.hysteresis_weights) == len(self.hysteresis_widths_n),
+                "hysteresis_weights must have one weight per width",
+            )
+            for w in self.hysteresis_weights:
+                require_finite(w, "hysteresis_weights", low=0.0)
+            require(sum(self.hysteresis_weights) > 0, "hysteresis_weights must not all be 0")
+
+    def ideal_instruments(self) -> FsrParams:
+        """The same sensor read without noise, quantisation, zero offset or time jitter."""
+        return replace(
+            self,
+            ohmmeter_noise_rel=0.0,
+            ohmmeter_counts=0,
+            load_cell_noise_n=0.0,
+            load_cell_offset_sigma_n=0.0,
+            load_cell_resolution_n=0.0,
+            jitter_fraction=0.0,
+        )
+
+    def static_only(self) -> FsrParams:
+        """The same sensor without creep, flow and hysteresis (its static curve only)."""
+        return replace(self, a_fast=0.0, a_slow=0.0, eta_flow_s=math.inf, hysteresis_amplitude=0.0)
+
+    def out_of_catalogue(self) -> dict[str, float]:
+        """The out-of-catalogue effects that are on, with their values."""
+        values = {"wear_per_cycle": self.wear_per_cycle, "rate_gain_s": self.rate_gain_s}
+        values["humidity"] = self.humidity
+        return {k: v for k, v in values.items() if v != 0.0}
+
+    def weights(self) -> FloatArray:
+        """Hysteresis weights, normalised to sum 1."""
+        w = np.asarray(self.hysteresis_weights or [1.0] * len(self.hysteresis_widths_n), dtype=np.float64)
+        return np.asarray(w / w.sum())
+
+
+@dataclass(frozen=True)
+class RunConditions:
+    """What changes from one run to the next (drawn from the seed and the run index)."""
+
+    gain: float  # on k
+    exponent: float  # n of this run
+    load_cell_offset_n: float
+    humidity_phase_rad: float
+    prior_cycles: int = 0  # loading cycles the sensor had seen before the run (wear)
