@@ -11,12 +11,14 @@ from ..analysis.calibration import (
     MODELS,
     OBJECTIVE_OPTIONS,
     OFFSET_CHOICES,
+    Calibration,
     calibrate,
     format_report,
     write_calibration,
 )
 from ..analysis.records import DEFAULT_CHANNEL, read_record
 from ..config.calibration_file import check_calibration_file
+from ..config.install import Installed, check_install_target, install_calibration
 from ..errors import ConfigError, RecordError
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
 from .common import parse_assignments
@@ -88,6 +90,23 @@ from .common import parse_assignments
     type=click.FloatRange(min=0.0, min_open=True),
     help="with --update: use only the record's first S seconds",
 )
+@click.option(
+    "--install",
+    "install_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    metavar="CONFIG.toml",
+    help='name --out in a device of this gateway configuration (calibration = "...", relative to it; '
+    "comments kept); without RECORD.csv: install --out as it is",
+)
+@click.option(
+    "--device", "device_name", metavar="NAME", help="with --install: the device (if there are several)"
+)
+@click.option(
+    "--replace-overrides",
+    is_flag=True,
+    help="with --install: drop the configuration's keys that contradict the calibration (a channel's or "
+    "the device's parameter or effects); without it they are listed and nothing is installed",
+)
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object and nothing else")
 @click.option("--force", "overwrite", is_flag=True, help="replace --out even if it is not a calibration file")
 def calibrate_cmd(
@@ -104,6 +123,9 @@ def calibrate_cmd(
     update_path: Path | None,
     known: tuple[str, ...],
     first_s: float | None,
+    install_path: Path | None,
+    device_name: str | None,
+    replace_overrides: bool,
     as_json: bool,
     overwrite: bool,
 ) -> None:
@@ -113,7 +135,27 @@ def calibrate_cmd(
     configuration, say) unless ``--force``.
 
     ``--update CAL.toml`` re-fits the sensitivity of a stored curve calibration from a short
-    RECORD.csv (the first minutes of a new run) or from ``--known`` loads."""
+    RECORD.csv (the first minutes of a new run) or from ``--known`` loads.
+
+    ``--install CONFIG.toml [--device NAME]`` names the calibration in the device's configuration,
+    so that the gateway reads it; keys of the configuration that contradict it are listed and
+    nothing is installed, unless ``--replace-overrides`` drops them."""
+    if install_path is None and (device_name is not None or replace_overrides):
+        raise click.UsageError("--device and --replace-overrides go with --install CONFIG.toml")
+    if install_path is not None:
+        if update_path is not None:
+            raise click.UsageError(
+                "--install goes with a calibration from RECORD.csv, or alone with --out CAL.toml (an "
+                "existing file); a configuration that names CAL reads it as --update rewrites it"
+            )
+        if out_path is None:
+            raise click.UsageError(
+                "--install needs --out CAL.toml: the calibration file the device will name"
+            )
+        _install_target(install_path, device_name)
+        if record_path is None:
+            _install(out_path, install_path, device_name, replace_overrides, as_json, existing=True)
+            return
     if update_path is not None:
         update_calibration(
             update_path, record_path, known, first_s, channel_names, as_name, out_path, as_json
@@ -181,6 +223,11 @@ def calibrate_cmd(
             payload["written"] = str(out_path)
         if written:
             payload["plots"] = written
+        if install_path is not None and out_path is not None:
+            _check_effects(results, rename, out_path, install_path)
+            payload["installed"] = _installed_dict(
+                _do_install(out_path, install_path, device_name, replace_overrides)
+            )
         click.echo(json.dumps(payload))
         return
     for cal in results:
@@ -192,6 +239,9 @@ def calibrate_cmd(
         click.echo(f"wrote {out_path}")
     for p in written:
         click.echo(f"wrote {p}")
+    if install_path is not None and out_path is not None:
+        _check_effects(results, rename, out_path, install_path)
+        _install(out_path, install_path, device_name, replace_overrides, as_json=False)
 
 
 def update_calibration(
@@ -284,3 +334,90 @@ def _check_out(path: Path, overwrite: bool) -> None:
             f"--out: {path} exists and is not a calibration file (it could be your gateway configuration); "
             f"refusing to replace it: choose another file, or --force ({exc})"
         ) from None
+
+
+class _Refused(click.ClickException):
+    """A refused install: the message, exit status 2 (as ``channels set``'s refusals)."""
+
+    exit_code = 2
+
+
+def _install_target(config_path: Path, device_name: str | None) -> None:
+    """Before a fit: the configuration is a gateway's and has the device (or refuse)."""
+    try:
+        check_install_target(config_path, device_name)
+    except ConfigError as exc:
+        raise _Refused(str(exc)) from None
+
+
+def _do_install(cal_path: Path, config_path: Path, device_name: str | None, replace: bool) -> Installed:
+    try:
+        return install_calibration(config_path, cal_path, device_name, replace_overrides=replace)
+    except ConfigError as exc:
+        again = f"tactile-gateway calibrate --out {cal_path} --install {config_path}" + (
+            f" --device {device_name}" if device_name else ""
+        )
+        raise _Refused(
+            f"{exc}\n({cal_path} is written; to install it: {again} [--replace-overrides])"
+        ) from None
+
+
+def _installed_dict(done: Installed) -> dict[str, object]:
+    return {
+        "config": str(done.config),
+        "device": done.device,
+        "calibration": done.calibration,
+        "previous": done.previous,
+        "changed": done.changed,
+        "dropped": [
+            {
+                "channel": c.channel,
+                "key": c.key,
+                "where": c.where,
+                "config_value": list(c.config_value) if isinstance(c.config_value, tuple) else c.config_value,
+                "calibrated_value": (
+                    list(c.calibrated_value) if isinstance(c.calibrated_value, tuple) else c.calibrated_value
+                ),
+            }
+            for c in done.dropped
+        ],
+    }
+
+
+def _install(
+    cal_path: Path,
+    config_path: Path,
+    device_name: str | None,
+    replace: bool,
+    as_json: bool,
+    existing: bool = False,
+) -> None:
+    """``--install``: name ``cal_path`` in the device, and say what changed."""
+    if existing:
+        try:
+            check_calibration_file(cal_path)
+        except ConfigError as exc:
+            raise _Refused(
+                f"--install: --out {cal_path} is not a calibration file to install ({exc})"
+            ) from None
+    done = _do_install(cal_path, config_path, device_name, replace)
+    if as_json:
+        click.echo(json.dumps({"installed": _installed_dict(done)}))
+        return
+    for line in done.lines():
+        click.echo(line)
+
+
+def _check_effects(
+    results: list[Calibration], rename: dict[str, str], cal_path: Path, config_path: Path
+) -> None:
+    """Refuse to install a file whose channels were fitted with different effects: its ``[meta]
+    effects`` are the first channel's, and the gateway reads every calibrated channel with them."""
+    fitted = {rename.get(c.channel, c.channel): tuple(c.fit.effects) for c in results}
+    if len(set(fitted.values())) > 1:
+        listed = "; ".join(f"{name}: {', '.join(effects)}" for name, effects in fitted.items())
+        raise _Refused(
+            f"refused, {config_path} is unchanged: the channels were fitted with different effects "
+            f"({listed}), and {cal_path} names one list ([meta] effects), which the gateway reads every "
+            "calibrated channel with; calibrate the channels with the same --effects"
+        )

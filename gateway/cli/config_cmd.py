@@ -9,6 +9,7 @@ configuration invalid is refused and leaves the file untouched).
 from __future__ import annotations
 
 import math
+import tomllib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn, TypeVar
@@ -16,6 +17,7 @@ from typing import Any, NoReturn, TypeVar
 import click
 
 from ..config import BusConfig, DeviceConfig, GatewayConfig, parse_config
+from ..config.device import device_overrides
 from ..config.editor import (
     Assignment,
     ChannelTarget,
@@ -28,6 +30,8 @@ from ..config.editor import (
     read_config_text,
 )
 from ..config.mqtt import MqttConfig
+from ..config.overrides import DEVICE_OVERRIDE_KEY, OVERRIDE_KEY, Contradiction, show
+from ..config.tables import Context
 from ..errors import ConfigError
 from ..metrics.web_config import load_web_config
 from ..modbus.plan import MERGE_GAP, device_plan
@@ -195,15 +199,40 @@ def _mqtt_line(mqtt: MqttConfig | None) -> str:
     )
 
 
+def _overrides(text: str, config_path: Path, b: int, d: int) -> tuple[Contradiction, ...]:
+    """The keys of device ``d`` of bus ``b`` that override its calibration, as the file says."""
+    device = tomllib.loads(text.removeprefix("\ufeff"))["bus"][b]["device"][d]
+    return device_overrides(Context(config_path), f"bus[{b}].device[{d}]", device)
+
+
+def _override_lines(found: Sequence[Contradiction]) -> list[str]:
+    """``check-config``'s list of a calibrated device's overrides: channel, key, both values."""
+    if not found:
+        return [
+            "    calibration overrides: none (every calibrated channel is read with the calibration's values)"
+        ]
+    out = [
+        f"    calibration overrides ({len(found)}; the config's value is read, as {OVERRIDE_KEY} / "
+        f"{DEVICE_OVERRIDE_KEY} say):"
+    ]
+    for c in found:
+        out.append(
+            f"      {c.channel}: {c.key} = {show(c.config_value)} ({c.where}) over the calibrated "
+            f"{show(c.calibrated_value)} ({c.calibrated_where})"
+        )
+    return out
+
+
 @click.command("check-config")
 @config_option
 def check_config(config_path: Path) -> None:
-    """Validate a configuration file and print the read plan of every device.
+    """Validate a configuration file and print the read plan of every device, and the keys
+    that override a device's calibration.
 
     Exit status 0 if the file is valid; otherwise the reason goes to stderr and the exit
     status is 2.
     """
-    _, config = _load(config_path)
+    text, config = _load(config_path)
     if config.metrics.web_config is not None:
         # what `run` loads, the same way (TLS key and certificate into an SSL context included)
         try:
@@ -219,9 +248,9 @@ def check_config(config_path: Path) -> None:
     web = f", web config {config.metrics.web_config}" if config.metrics.web_config else ""
     click.echo(f"metrics: {_host_port(config.metrics.host, config.metrics.port)}/metrics{web}")
     click.echo(_mqtt_line(config.mqtt))
-    for bus in config.buses:
+    for b, bus in enumerate(config.buses):
         click.echo(_bus_line(bus))
-        for dev in bus.devices:
+        for d, dev in enumerate(bus.devices):
             plan = device_plan(dev, bus.max_read_registers, MERGE_GAP, clock=True)
             registers = sum(r.count for r in plan)
             enabled = len(dev.enabled_channels)
@@ -237,6 +266,9 @@ def check_config(config_path: Path) -> None:
                 )
             for line in _device_lines(dev):
                 click.echo(line)
+            if dev.calibration is not None:
+                for line in _override_lines(_overrides(text, config_path, b, d)):
+                    click.echo(line)
 
 
 # ----------------------------------------------------------------------------------------------
