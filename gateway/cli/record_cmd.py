@@ -19,6 +19,7 @@ from typing import Any
 import click
 
 from ..analysis.recorder import LiveRecorder, RecorderStats, record_path_ok
+from ..atomic import AtomicFile
 from ..config import GatewayConfig, RegisterMap, load_config
 from ..errors import ConfigError
 from ..runtime.poller import Poller, SnapshotHolder
@@ -67,16 +68,14 @@ async def record_live(
         with contextlib.suppress(RuntimeError, ValueError, NotImplementedError):
             loop.add_signal_handler(sig, stop.set)
             handled.append(sig)
-    fd, tmp = tempfile.mkstemp(dir=out_path.parent, prefix=f".{out_path.name}.", suffix=".tmp")
-    written = False
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+        with AtomicFile(out_path) as out:
             meta = {
                 "source": "tactile-gateway record",
                 "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
                 **(metadata or {}),
             }
-            recorder = LiveRecorder(fh, config, channels, meta, device=device)
+            recorder = LiveRecorder(out.text, config, channels, meta, device=device)
             holder = SnapshotHolder()
             holder.subscribe(recorder)
             t0 = time.monotonic()
@@ -92,22 +91,11 @@ async def record_live(
                         await asyncio.wait_for(stop.wait(), timeout=wait_s)
             if show_progress:
                 _progress(min(time.monotonic() - t0, duration_s), duration_s, recorder.stats, final=True)
-            if (keep_existing_if_empty and recorder.stats.rows == 0) or (
-                cancel is not None and cancel.is_set()
-            ):
-                return recorder.stats  # the temporary file is removed below
-            fh.flush()
-            os.fsync(fh.fileno())
-        mask = os.umask(0o022)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)
-        os.replace(tmp, out_path)
-        written = True
+            empty = keep_existing_if_empty and recorder.stats.rows == 0
+            if not empty and not (cancel is not None and cancel.is_set()):
+                out.commit()  # otherwise leaving the block removes the temporary file
         return recorder.stats
     finally:
-        if not written:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
         for sig in handled:
             loop.remove_signal_handler(sig)
 

@@ -15,23 +15,20 @@ reference applied).
 
 from __future__ import annotations
 
-import contextlib
 import datetime
 import json
 import math
-import os
 import signal
 import sys
-import tempfile
 import time
 from pathlib import Path
 from types import FrameType
-from typing import TextIO
 
 import click
 
 from ..analysis.recorder import record_path_ok
 from ..analysis.records import RecordWriter
+from ..atomic import AtomicFile
 from ..errors import ConfigError
 from ..mqtt.subscribe_settings import SESSION_EXPIRY_S
 from ..mqtt.subscriber import (
@@ -70,10 +67,8 @@ class _Recorder:
 
     def __init__(self, path: Path, label_gateway: bool, label_device: bool, meta: dict[str, str]) -> None:
         self.path = path
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-        self.tmp = Path(tmp)
-        self.fh: TextIO = os.fdopen(fd, "w", encoding="utf-8", newline="")
-        self.writer = RecordWriter(self.fh, meta)
+        self.file = AtomicFile(path)
+        self.writer = RecordWriter(self.file.text, meta)
         self.label_gateway, self.label_device = label_gateway, label_device
         self.t0: dict[tuple[str, str], float] = {}
         self.last: dict[tuple[str, str], float] = {}
@@ -105,21 +100,11 @@ class _Recorder:
         self.writer.flush()
 
     def close(self, keep: bool) -> None:
-        self.fh.flush()
-        os.fsync(self.fh.fileno())
-        self.fh.close()
+        """Put the record in place (``keep``) or leave the target as it was."""
         if keep:
-            os.chmod(self.tmp, 0o666 & ~_umask())
-            os.replace(self.tmp, self.path)
+            self.file.commit()
         else:
-            with contextlib.suppress(OSError):
-                self.tmp.unlink()
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
+            self.file.discard()
 
 
 def _fail(message: str) -> None:

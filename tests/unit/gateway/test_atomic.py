@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from gateway.atomic import atomic_write_bytes, atomic_write_text
+from gateway.atomic import AtomicFile, atomic_write_bytes, atomic_write_text
 
 
 @pytest.fixture
@@ -112,3 +112,40 @@ def test_bytes_variant(tmp_path: Path) -> None:
     target = tmp_path / "b.bin"
     atomic_write_bytes(target, b"\x00\x01\xff")
     assert target.read_bytes() == b"\x00\x01\xff"
+
+
+def test_a_streamed_file_appears_whole_at_commit_and_not_before(tmp_path: Path) -> None:
+    target = tmp_path / "rec.csv"
+    target.write_text("old record\n")
+    with AtomicFile(target) as out:
+        out.text.write("time_s,resistance_ohm\r\n")
+        out.text.flush()  # flushed pieces are still not the target's
+        assert target.read_text() == "old record\n"
+        out.write_bytes(b"0.0,inf\n")
+        out.text.write("0.5,1000.0\n")
+        out.commit()
+    assert target.read_bytes() == b"time_s,resistance_ohm\r\n0.0,inf\n0.5,1000.0\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["rec.csv"]
+
+
+def test_a_discarded_or_abandoned_file_leaves_the_target_and_no_temporary_file(tmp_path: Path) -> None:
+    target = tmp_path / "rec.csv"
+    target.write_text("old record\n")
+    with AtomicFile(target) as out:
+        out.text.write("half a record")
+        out.discard()
+    with pytest.raises(KeyboardInterrupt), AtomicFile(target) as out:
+        out.text.write("half a record")
+        raise KeyboardInterrupt
+    with AtomicFile(tmp_path / "new.csv") as out:
+        out.text.write("never committed")
+    assert target.read_text() == "old record\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["rec.csv"]
+
+
+def test_a_file_is_committed_once(tmp_path: Path) -> None:
+    out = AtomicFile(tmp_path / "a.txt")
+    out.commit()
+    with pytest.raises(ValueError, match="already committed or discarded"):
+        out.commit()
+    assert (tmp_path / "a.txt").read_bytes() == b""

@@ -6,6 +6,7 @@ that looks complete."""
 from __future__ import annotations
 
 import asyncio
+import stat
 from pathlib import Path
 
 import pytest
@@ -48,3 +49,17 @@ def test_record_writes_a_temporary_file_and_renames_it_at_the_end(tmp_path: Path
     assert any(name.startswith(".run.csv.") and name.endswith(".tmp") for name in seen[0])
     assert sorted(p.name for p in tmp_path.iterdir()) == ["gw.toml", "run.csv"]
     assert "time_s" in out.read_text()
+
+
+def test_record_replaces_an_earlier_record_through_its_link_keeping_its_mode(tmp_path: Path) -> None:
+    # the one atomic writer (gateway.atomic): a link is followed and stays, the mode is kept
+    config = load_config(_config(tmp_path))
+    real = tmp_path / "real.csv"
+    real.write_text("time_s,resistance_ohm\n0,1000\n")
+    real.chmod(0o600)
+    link = tmp_path / "run.csv"
+    link.symlink_to(real)
+    asyncio.run(record_live(config, link, 5.0, show_progress=False, until=lambda: True))
+    assert link.is_symlink() and link.resolve() == real
+    assert stat.S_IMODE(real.stat().st_mode) == 0o600
+    assert "tactile-gateway record" in real.read_text() and "1000" not in real.read_text()
