@@ -35,7 +35,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..atomic import atomic_write_text
 from ..config.calibration_file import calibrated_device, calibration_channels, calibration_effects
 from ..config.schema import ChannelConfig
 from ..errors import GatewayError
@@ -43,7 +42,7 @@ from ..runtime.processor import DeviceProcessor
 from ..runtime.replay import ChannelSeries, ReplayedChannel, replay
 from ..runtime.snapshot import STATUS_LABELS, ChannelStatus
 from .holds import EDGE_FRACTION, MIN_HOLD_S, Hold, find_holds
-from .records import ChannelRecord, Record
+from .records import ChannelRecord, Record, RecordWriter, write_record
 
 __all__ = [
     "APPLIED_COLUMNS",
@@ -216,32 +215,19 @@ def apply_calibration(
 
 
 # ------------------------------------------------------------------------------ the record
-def _fmt(value: float) -> str:
-    """As the record writer writes a number (the shortest text that reads back the same
-    double, ``inf``); nothing for NaN (no value)."""
-    v = float(value)
-    if math.isnan(v):
-        return ""
-    if math.isinf(v):
-        return "inf" if v > 0 else "-inf"
-    return repr(v)
-
-
 def applied_record_text(applied: Applied, metadata: Mapping[str, str] | None = None) -> str:
     """The record with ``APPLIED_COLUMNS`` added, rows in the record's order (by source line):
     ``time_s, channel, resistance_ohm[, force_n][, temperature_c], force_tracked_n,
-    force_static_n, status``; a force with no value (status ``error``, ``open``, ...) is empty."""
+    force_static_n, status``; a force with no value (status ``error``, ``open``, ...) is empty.
+    Written by the records' one writer (``records.RecordWriter``)."""
     chans = applied.channels
     has_force = bool(chans) and all(c.record.force_n is not None for c in chans)
     has_temp = bool(chans) and all(c.record.temperature_c is not None for c in chans)
     out = io.StringIO()
     meta = {**applied.record.metadata, **(metadata or {})}
-    for key, value in meta.items():
-        out.write(f"# {key}: {' '.join(str(value).split())}\n")
-    cols = ["time_s", "channel", "resistance_ohm"]
-    cols += ["force_n"] if has_force else []
-    cols += ["temperature_c"] if has_temp else []
-    out.write(",".join([*cols, *APPLIED_COLUMNS]) + "\n")
+    writer = RecordWriter(
+        out, meta, has_force=has_force, has_temperature=has_temp, extra_columns=APPLIED_COLUMNS
+    )
     lines = np.concatenate([c.record.line for c in chans]) if chans else np.zeros(0, dtype=np.int64)
     owner = np.concatenate([np.full(c.record.n_samples, j) for j, c in enumerate(chans)]) if chans else lines
     index = np.concatenate([np.arange(c.record.n_samples) for c in chans]) if chans else lines
@@ -249,19 +235,20 @@ def applied_record_text(applied: Applied, metadata: Mapping[str, str] | None = N
         ch = chans[int(owner[pos])]
         i = int(index[pos])
         rec = ch.record
-        fields = [_fmt(rec.time_s[i]), ch.name, _fmt(rec.resistance_ohm[i])]
-        if has_force and rec.force_n is not None:
-            fields.append(_fmt(rec.force_n[i]))
-        if has_temp and rec.temperature_c is not None:
-            fields.append(_fmt(rec.temperature_c[i]))
-        fields += [_fmt(ch.force_tracked_n[i]), _fmt(ch.force_static_n[i]), STATUS_LABELS[int(ch.status[i])]]
-        out.write(",".join(fields) + "\n")
+        writer.row(
+            rec.time_s[i],
+            ch.name,
+            rec.resistance_ohm[i],
+            rec.force_n[i] if has_force and rec.force_n is not None else None,
+            rec.temperature_c[i] if has_temp and rec.temperature_c is not None else None,
+            (ch.force_tracked_n[i], ch.force_static_n[i], STATUS_LABELS[int(ch.status[i])]),
+        )
     return out.getvalue()
 
 
 def write_applied(path: Path, applied: Applied, metadata: Mapping[str, str] | None = None) -> None:
-    """Write ``applied_record_text`` atomically (a reader never sees half a file)."""
-    atomic_write_text(path, applied_record_text(applied, metadata))
+    """Write ``applied_record_text`` atomically (``records.write_record``)."""
+    write_record(path, applied_record_text(applied, metadata))
 
 
 # ------------------------------------------------------------------------------ the errors

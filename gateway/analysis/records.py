@@ -382,8 +382,12 @@ class RecordWriter:
     back as the same double (``inf`` for an open circuit).
 
     ``has_force`` / ``has_temperature`` add the ``force_n`` (N) / ``temperature_c`` (degC)
-    columns. ``row`` writes one row; ``flush`` passes the rows to the file, so a recording
-    that is interrupted is a valid record of what was written before.
+    columns, ``extra_columns`` columns after them that a reader keeps as extra (``apply``'s
+    ``force_tracked_n``, ``force_static_n``, ``status``): a number as the others, NaN (no
+    value) as an empty field, a label as written. A metadata value is written on one line,
+    its runs of white space (line breaks too) as one space. ``row`` writes one row; ``flush``
+    passes the rows to the file, so a recording that is interrupted is a valid record of what
+    was written before.
     """
 
     def __init__(
@@ -393,16 +397,24 @@ class RecordWriter:
         *,
         has_force: bool = False,
         has_temperature: bool = False,
+        extra_columns: Sequence[str] = (),
     ) -> None:
         self.out = out
         self.has_force = has_force
         self.has_temperature = has_temperature
+        self.extra_columns = tuple(extra_columns)
         for key, value in (metadata or {}).items():
-            out.write(f"# {key}: {value}\n")
+            out.write(f"# {key}: {' '.join(str(value).split())}\n")
         cols = ["time_s", "channel", "resistance_ohm"]
         cols += ["force_n"] if has_force else []
         cols += ["temperature_c"] if has_temperature else []
-        out.write(",".join(cols) + "\n")
+        clash = [c for c in self.extra_columns if c in KNOWN_COLUMNS or not _plain_label(c)]
+        if clash or len(set(self.extra_columns)) != len(self.extra_columns):
+            raise ValueError(
+                f"extra columns {', '.join(map(repr, self.extra_columns))}: each must be new, once, "
+                "and free of commas, quotes and line breaks"
+            )
+        out.write(",".join([*cols, *self.extra_columns]) + "\n")
 
     def row(
         self,
@@ -411,8 +423,10 @@ class RecordWriter:
         resistance_ohm: float,
         force_n: float | None = None,
         temperature_c: float | None = None,
+        extra: Sequence[float | str] = (),
     ) -> None:
-        """One sample of one channel; ``force_n`` / ``temperature_c`` when the record has them."""
+        """One sample of one channel; ``force_n`` / ``temperature_c`` when the record has
+        them, ``extra`` one value per extra column."""
         fields = [_fmt(time_s), channel, _fmt(resistance_ohm)]
         if self.has_force:
             if force_n is None:
@@ -422,6 +436,13 @@ class RecordWriter:
             if temperature_c is None:
                 raise ValueError("this record has a temperature_c column: give temperature_c")
             fields.append(_fmt(temperature_c))
+        if len(extra) != len(self.extra_columns):
+            raise ValueError(
+                f"this record has {len(self.extra_columns)} extra columns "
+                f"({', '.join(self.extra_columns) or 'none'}): give {len(self.extra_columns)} values, "
+                f"got {len(extra)}"
+            )
+        fields += [_cell(value) for value in extra]
         self.out.write(",".join(fields) + "\n")
 
     def flush(self) -> None:
@@ -462,6 +483,20 @@ def _fmt(value: float) -> str:
     if math.isinf(v):
         return "inf" if v > 0 else "-inf"
     return repr(v)
+
+
+def _plain_label(text: str) -> bool:
+    """True when ``text`` stands in a CSV field as it is (no comma, quote or line break)."""
+    return bool(text) and not any(c in text for c in ',"\r\n')
+
+
+def _cell(value: float | str) -> str:
+    """An extra column's field: a label as written, a number as ``_fmt``, NaN (no value) empty."""
+    if isinstance(value, str):
+        if value and not _plain_label(value):
+            raise ValueError(f"{value!r}: a label in a record has no comma, quote or line break")
+        return value
+    return "" if math.isnan(value) else _fmt(value)
 
 
 def write_record(path: str | os.PathLike[str], text: str) -> None:

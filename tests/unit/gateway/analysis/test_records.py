@@ -305,3 +305,31 @@ def test_property_forces_within_the_tolerance_load_and_beyond_it_are_refused(
     else:
         with pytest.raises(RecordError, match="zero-noise tolerance"):
             parse_record(text)
+
+
+def test_the_writer_writes_extra_columns_empty_for_no_value_and_metadata_on_one_line() -> None:
+    out = io.StringIO()
+    writer = RecordWriter(
+        out, {"note": "two\nlines  and\ttabs"}, has_force=True, extra_columns=("force_tracked_n", "status")
+    )
+    writer.row(0.5, "tip", 1234.5, 2.0, extra=(1.75, "ok"))
+    writer.row(1.0, "tip", math.inf, 0.0, extra=(math.nan, "open"))
+    assert out.getvalue() == (
+        "# note: two lines and tabs\n"
+        "time_s,channel,resistance_ohm,force_n,force_tracked_n,status\n"
+        "0.5,tip,1234.5,2.0,1.75,ok\n"
+        "1.0,tip,inf,0.0,,open\n"
+    )
+    back = parse_record(out.getvalue())
+    assert back.metadata == {"note": "two lines and tabs"}
+    assert back.extra_columns == ("force_tracked_n", "status")
+    with pytest.raises(ValueError, match="give 2 values, got 1"):
+        writer.row(1.5, "tip", 1.0, 0.0, extra=(1.0,))
+    with pytest.raises(ValueError, match="no comma, quote or line break"):
+        writer.row(1.5, "tip", 1.0, 0.0, extra=(1.0, "a,b"))
+
+
+@pytest.mark.parametrize("extra", [("force_n",), ("x", "x"), ("a,b",), ("",)])
+def test_the_writer_refuses_extra_columns_that_would_not_read_back(extra: tuple[str, ...]) -> None:
+    with pytest.raises(ValueError, match="each must be new, once"):
+        RecordWriter(io.StringIO(), has_force=True, extra_columns=extra)
