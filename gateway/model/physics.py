@@ -7,6 +7,8 @@ evaluator are built from these.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import constants
@@ -15,7 +17,10 @@ FloatArray = NDArray[np.float64]
 
 #: exp(-36) ~ 2e-16: a smaller decay factor is zero in double precision.
 MIN_LOG_DECAY = -36.0
-_RECURRENCE_WINDOW = 65536  # bounds the rounding of the running sums
+#: Most e-folds of decay one block of ``relax_series`` spans: exp(600) ~ 4e260 keeps its
+#: scaled sums finite for targets up to ~1e47.
+_BLOCK_LOG_DECAY = 600.0
+_BLOCK_ROWS = 8192  # bounds the rounding of a block's running sums
 
 
 def tunneling_decay_per_m(barrier_height_ev: ArrayLike) -> FloatArray:
@@ -87,29 +92,74 @@ def kelvin_step(
 def relax_series(log_a: FloatArray, target: FloatArray, x0: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Solve x[k] = target[k] + (x[k-1] - target[k]) a[k] for k = 0..T-1 from x[-1] = x0.
 
-    The Kelvin update of ``kelvin_step`` over a series, a = exp(log_a). Returns (x, x[T-1]).
-    Vectorized in chunks in which the cumulative log decay stays within the exponent range of
-    a double; the sum is carried in scaled form.
+    The Kelvin update of ``kelvin_step`` over a series, a = exp(log_a) with log a clamped at
+    ``MIN_LOG_DECAY``; ``log_a`` and ``target`` broadcast to (T, ...), ``x0`` to its trailing
+    shape. Returns (x, x[T-1]).
+
+    In scaled form x[k] = D[k] (x0 + sum_j<=k (1 - a[j]) target[j] / D[j]), D the running
+    product of the decays, which a double holds while the decay spans at most
+    ``_BLOCK_LOG_DECAY`` e-folds. One pass whatever the time constant: the rows are cut into
+    equal blocks that span no more than that in any channel, every block is solved from a
+    zero start at once, and the blocks' end states follow from a doubling scan of their maps
+    x -> A x + B (``_compose_affine``), which only multiplies by decays and adds.
     """
-    n_t = log_a.shape[0]
-    out = np.empty(np.broadcast_shapes(log_a.shape, target.shape))
-    log_a = np.broadcast_to(np.maximum(log_a, MIN_LOG_DECAY), out.shape)
-    target = np.broadcast_to(target, out.shape)
-    b = target * (-np.expm1(log_a))  # x[k] = a x[k-1] + (1 - a) target
-    x = np.asarray(x0, dtype=np.float64)
-    start = 0
-    while start < n_t:
-        window = min(n_t - start, _RECURRENCE_WINDOW)
-        cum = np.cumsum(log_a[start : start + window], axis=0)
-        over = np.nonzero(np.max(-cum, axis=tuple(range(1, cum.ndim))) > 600.0)[0]
-        chunk = max(1, int(over[0])) if over.size else window
-        seg = slice(start, start + chunk)
-        lc = cum[:chunk]
-        scaled = np.cumsum(b[seg] * np.exp(-lc), axis=0)
-        out[seg] = np.exp(lc) * (x + scaled)
-        x = out[start + chunk - 1]
-        start += chunk
-    return out, np.asarray(x)
+    log_a = np.maximum(log_a, MIN_LOG_DECAY, dtype=np.float64)
+    minus_b = np.multiply(target, np.expm1(log_a))  # -(1 - a) target, broadcast to (T, ...)
+    n_t = minus_b.shape[0]
+    x0 = np.asarray(x0, dtype=np.float64)
+    if n_t == 0:
+        return minus_b, x0
+    peak = float(np.fmax.reduce(np.abs(log_a), axis=None))  # NaN only when all of it is
+    rows = min(_BLOCK_ROWS, n_t)
+    if peak > 0.0:
+        rows = max(1, int(min(_BLOCK_LOG_DECAY // peak, rows)))
+    if rows < n_t:
+        out = _relax_blocks(np.broadcast_to(log_a, minus_b.shape), minus_b, x0, rows)
+        return out, np.asarray(out[-1])
+    decay = np.exp(np.cumsum(log_a, axis=0))
+    x = np.cumsum(np.divide(minus_b, decay, out=minus_b), axis=0, out=minus_b)
+    np.subtract(x0, x, out=x)
+    np.multiply(x, decay, out=x)
+    return x, np.asarray(x[-1])
+
+
+def _relax_blocks(log_a: FloatArray, minus_b: FloatArray, x0: FloatArray, rows: int) -> FloatArray:
+    """``relax_series`` over blocks of ``rows`` rows (the last one padded with a = 1, b = 0,
+    which leave x as it is), each in scaled form from a zero start, then joined."""
+    shape = minus_b.shape
+    n_t, n_ch = shape[0], math.prod(shape[1:])
+    n_blocks = -(-n_t // rows)
+    cum = np.zeros((n_blocks * rows, n_ch))
+    cum[:n_t] = log_a.reshape(n_t, n_ch)
+    x = np.zeros((n_blocks * rows, n_ch))
+    x[:n_t] = minus_b.reshape(n_t, n_ch)
+    cum, x = cum.reshape(n_blocks, rows, n_ch), x.reshape(n_blocks, rows, n_ch)
+    np.cumsum(cum, axis=1, out=cum)
+    decay = np.exp(cum, out=cum)  # since the block's start, >= exp(-_BLOCK_LOG_DECAY)
+    np.divide(x, decay, out=x)
+    np.cumsum(x, axis=1, out=x)
+    block_decay = decay[:, -1].copy()
+    block_end = np.multiply(decay[:, -1], x[:, -1])  # minus the end state from a zero start
+    _compose_affine(block_decay, block_end)
+    x0_ch = np.broadcast_to(x0, shape[1:]).reshape(n_ch)
+    start = np.empty((n_blocks, 1, n_ch))
+    start[0, 0] = x0_ch
+    np.subtract(np.multiply(block_decay[:-1], x0_ch), block_end[:-1], out=start[1:, 0])
+    np.subtract(start, x, out=x)
+    np.multiply(x, decay, out=x)
+    return np.asarray(x.reshape(n_blocks * rows, n_ch)[:n_t].reshape(shape))
+
+
+def _compose_affine(scale: FloatArray, offset: FloatArray) -> None:
+    """Inclusive prefix composition along axis 0 of the maps x -> scale[i] x + offset[i], in
+    place: afterwards row i maps the state before row 0 to the state after row i. log2(rows)
+    vectorized passes (Hillis-Steele); with 0 <= scale <= 1 nothing grows, so it cannot
+    overflow however fast the decay."""
+    shift = 1
+    while shift < scale.shape[0]:
+        np.add(offset[shift:], np.multiply(scale[shift:], offset[:-shift]), out=offset[shift:])
+        np.multiply(scale[shift:], scale[:-shift], out=scale[shift:])
+        shift *= 2
 
 
 def play_series(force_n: FloatArray, radius_n: FloatArray, p0_n: FloatArray) -> FloatArray:
