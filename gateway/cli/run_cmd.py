@@ -41,6 +41,7 @@ from ..metrics.server import MetricsServer
 from ..metrics.web_config import WebConfig, load_web_config
 from ..model import Divider
 from ..mqtt.link import MqttLink
+from ..runtime.frame import frame_of
 from ..runtime.poller import Poller, SnapshotHolder
 from ..runtime.priority import polls_fast
 from ..runtime.snapshot import VALUED_STATUSES, DeviceSnapshot, GatewaySnapshot
@@ -203,39 +204,45 @@ def run(config_path: Path, no_page: bool, log_level: str) -> None:
 
 
 # --------------------------------------------------------------------------- poll-once
-def _num(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else round(float(x), 6)
-
-
 def snapshot_json(snap: GatewaySnapshot) -> dict[str, Any]:
-    """A JSON-ready view of a snapshot (absent values are null, never NaN)."""
+    """A JSON-ready view of a snapshot: each device's published ``Frame`` (``runtime.frame``:
+    its rounding and its None for an absent value, never NaN), with the bus and each
+    channel's index and position."""
     devices = []
     for name in sorted(snap.devices):
         dev = snap.devices[name]
-        cop = dev.center_of_pressure_mm
+        frame = frame_of(dev)
+        cop = frame.center_of_pressure_mm
         devices.append(
             {
                 "device": name,
                 "bus": dev.bus,
-                "up": dev.up,
-                "error": dev.error,
-                "total_force_n": _num(dev.total_force_n),
-                "center_of_pressure_mm": None if cop is None else [_num(cop[0]), _num(cop[1])],
-                "channels_in_contact": dev.channels_in_contact,
-                "contact_area_mm2": _num(dev.contact_area_mm2),
-                "peak_channel": dev.peak_channel,
+                "up": frame.up,
+                "error": frame.error,
+                "total_force_n": frame.total_force_n,
+                "center_of_pressure_mm": None if cop is None else list(cop),
+                "channels_in_contact": frame.channels_in_contact,
+                "contact_area_mm2": frame.contact_area_mm2,
+                "peak_channel": frame.peak_channel,
                 "channels": [
                     {
                         "index": c.index,
                         "name": c.name,
                         "x_mm": c.x_mm,
                         "y_mm": c.y_mm,
-                        "status": c.status.label,
-                        "resistance_ohm": _num(c.resistance_ohm),
-                        "force_n": _num(c.force_n),
-                        "force_static_n": _num(c.force_static_n),
+                        "status": status.label,
+                        "resistance_ohm": resistance_ohm,
+                        "force_n": force_n,
+                        "force_static_n": force_static_n,
                     }
-                    for c in dev.channels()
+                    for c, status, resistance_ohm, force_n, force_static_n in zip(
+                        dev.channels(),
+                        frame.status,
+                        frame.resistance_ohm,
+                        frame.force_n,
+                        frame.force_static_n,
+                        strict=True,
+                    )
                 ],
             }
         )

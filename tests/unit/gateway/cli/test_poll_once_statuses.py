@@ -3,7 +3,10 @@ force is shown beside its status, the table's columns stay aligned."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import pytest
 
 from gateway.cli.run_cmd import render_view, snapshot_json, snapshot_table
 from gateway.config import ChannelConfig, DeviceConfig, RegisterMap
@@ -11,6 +14,8 @@ from gateway.config.layout import GridLayout
 from gateway.modbus.image import RawSample
 from gateway.model import PAPER_EFFECTS, Divider, SensorParams
 from gateway.model.conversion import line_conversion
+from gateway.mqtt.payload import frame_dict
+from gateway.runtime import frame
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import GatewaySnapshot
 
@@ -55,3 +60,22 @@ def test_the_json_and_the_demo_view_carry_it() -> None:
     ]
     view = render_view(snap.devices["arr"], 4, "http://127.0.0.1:9830/metrics", color=False)
     assert "  8.00" in view and "  0.30" in view and "extrap" not in view
+
+
+def test_the_json_is_the_published_frame() -> None:
+    # one owner of rounding and of "absent": the frame MQTT publishes (runtime.frame)
+    snap = _snapshot()
+    (dev,) = snapshot_json(snap)["devices"]
+    published: dict[str, Any] = dict(frame_dict(snap.devices["arr"], 0))
+    for key in ("total_force_n", "contact_area_mm2", "channels_in_contact", "up", "center_of_pressure_mm"):
+        assert dev[key] == published[key], key
+    for key in ("force_n", "force_static_n", "resistance_ohm", "status"):
+        assert [c[key] for c in dev["channels"]] == published[key], key
+    # 1 / (M F + N) ohm: 1 / (2e-5 x 0.3 + 1e-6) = 142857.142857... ohm, six decimals
+    assert dev["channels"][0]["resistance_ohm"] == 142857.142857
+
+
+def test_the_json_rounds_as_the_frame_does(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(frame, "DECIMALS", 2)
+    (dev,) = snapshot_json(_snapshot())["devices"]
+    assert dev["channels"][0]["resistance_ohm"] == 142857.14
