@@ -44,16 +44,14 @@ from .calibration_range import (
 )
 from .calibration_report import format_report, outside_range_words, ranking_lines
 from .calibration_result import (
-    MODELS,
-    OBJECTIVE_CHOICES,
     OBJECTIVE_OPTIONS,
     OBJECTIVE_WORDS,
-    OFFSET_CHOICES,
     Calibration,
     CalibrationModel,
     Objective,
     OffsetMode,
     Score,
+    enum_value,
 )
 from .calibration_writer import HEADER, calibration_file, calibration_toml, write_calibration, written_name
 from .candidates import held_out_drift, rank_candidates
@@ -68,13 +66,10 @@ from .rivals import Rivals
 __all__ = [
     "HEADER",
     "LIGHT_TOUCH_N",
-    "MODELS",
     "MODEL_RANGE_ABOVE",
     "MODEL_RANGE_BELOW",
-    "OBJECTIVE_CHOICES",
     "OBJECTIVE_OPTIONS",
     "OBJECTIVE_WORDS",
-    "OFFSET_CHOICES",
     "TIME_EFFECTS",
     "Calibration",
     "CalibrationModel",
@@ -124,11 +119,8 @@ def calibrate(
     ``"fit"`` fits a reference zero offset, ``"auto"`` fits it and keeps it only if it lowers the
     held-out force RMS, ``"none"`` leaves it out. Held-out force errors of a fit with an offset
     are against F_ref + offset (the same as F_inv - offset against F_ref)."""
-    if objective not in OBJECTIVE_CHOICES:
-        raise ValueError(f"objective must be one of {', '.join(OBJECTIVE_CHOICES)}, got {objective!r}")
-    if force_offset not in OFFSET_CHOICES:
-        raise ValueError(f"force_offset must be one of {', '.join(OFFSET_CHOICES)}, got {force_offset!r}")
-    objective, force_offset = Objective(objective), OffsetMode(force_offset)
+    objective = enum_value(Objective, objective, "objective")
+    force_offset = enum_value(OffsetMode, force_offset, "force_offset")
     meta = dict(metadata or {})
     prior = prior or SensorParams()
     notes: list[str] = []

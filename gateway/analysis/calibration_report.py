@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from .calibration_range import model_force_range
-from .calibration_result import MODELS, OBJECTIVE_WORDS, Calibration
+from .calibration_result import OBJECTIVE_WORDS, Calibration, CalibrationModel
 
 __all__ = ["format_report", "outside_range_words", "ranking_lines"]
 
@@ -87,7 +87,8 @@ def format_report(cal: Calibration) -> str:
             "from the equilibrium at that load, as the gateway does"
         )
     if cal.best != "physics":
-        how = f"--model {cal.best} or --model auto" if cal.best in MODELS else "--model auto"
+        written = cal.best in {m.value for m in CalibrationModel}
+        how = f"--model {cal.best} or --model auto" if written else "--model auto"
         out.append(f"  (write it as the channel's model with {how})")
     return "\n".join(out)
 

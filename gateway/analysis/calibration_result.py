@@ -16,28 +16,26 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any
+from typing import Any, TypeVar
 
 from .calibration_range import model_force_range, widened_range_n
 from .candidates import Candidate
 from .fitting import FitResult
 from .holds import DriftGroups
 from .measurement import NoiseModel
-from .objectives import OFFSET
+from .objectives import OFFSET, Objective
 from .rivals import Rivals
 
 __all__ = [
-    "MODELS",
-    "OBJECTIVE_CHOICES",
     "OBJECTIVE_OPTIONS",
     "OBJECTIVE_WORDS",
-    "OFFSET_CHOICES",
     "STATIC_RIVALS",
     "Calibration",
     "CalibrationModel",
     "Objective",
     "OffsetMode",
     "Score",
+    "enum_value",
 ]
 
 
@@ -53,20 +51,6 @@ class CalibrationModel(StrEnum):
     AUTO = "auto"
 
 
-class Objective(StrEnum):
-    """What the physical model's fit minimises: log-resistance residuals, force residuals
-    (started from the log-R fit), or both, keeping the one that reads held-out force better."""
-
-    AUTO = "auto"
-    LOG_R = "log_r"
-    FORCE = "force"
-
-    @property
-    def option(self) -> str:
-        """The command line's spelling (``log-r``)."""
-        return self.value.replace("_", "-")
-
-
 class OffsetMode(StrEnum):
     """The reference-force zero offset: fit it and keep it only if it helps, fit it, or none."""
 
@@ -75,9 +59,18 @@ class OffsetMode(StrEnum):
     NONE = "none"
 
 
-MODELS = tuple(m.value for m in CalibrationModel)
-OBJECTIVE_CHOICES = tuple(o.value for o in Objective)
-OFFSET_CHOICES = tuple(o.value for o in OffsetMode)
+_Choice = TypeVar("_Choice", bound=StrEnum)
+
+
+def enum_value(kind: type[_Choice], value: str, name: str) -> _Choice:
+    """``value`` as a member of ``kind`` (the one list of what ``name`` may be); ``ValueError``
+    naming ``name`` and every value otherwise."""
+    try:
+        return kind(value)
+    except ValueError:
+        raise ValueError(f"{name} must be one of {', '.join(kind)}, got {value!r}") from None
+
+
 #: an objective by its command-line spelling (``log-r``)
 OBJECTIVE_OPTIONS = {o.option: o for o in Objective}
 OBJECTIVE_WORDS: dict[str, str] = {Objective.LOG_R: "log-R", Objective.FORCE: "force"}

@@ -16,7 +16,7 @@ from ..atomic import atomic_write_text
 from ..config.calibration_file import CalibrationFile, ChannelCalibration, ConversionTable
 from ..model import parameter_names
 from .calibration_range import model_force_range
-from .calibration_result import MODELS, OBJECTIVE_WORDS, Calibration, CalibrationModel
+from .calibration_result import OBJECTIVE_WORDS, Calibration, CalibrationModel, enum_value
 
 __all__ = [
     "HEADER",
@@ -75,9 +75,7 @@ def calibration_file(
     ``[channel.<name>]`` table (the physical model's parameters, its force range and the
     calibrated range) and, for a channel whose chosen ``model`` is a rival, its ``[line]``,
     ``[lookup]`` or ``[curve]`` table; ``[meta]`` names the record and the effects."""
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
-    model = CalibrationModel(model)
+    model = enum_value(CalibrationModel, model, "model")
     items = list(calibrations)
     rename = dict(names or {})
     meta_comments = tuple(

@@ -29,6 +29,7 @@ from .objectives import (
     LINEAR_PARAMETERS,
     OFFSET,
     OFFSET_SCALE,
+    Objective,
     Problem,
     check_objective,
     f_scale,
@@ -199,7 +200,7 @@ def fit_channel(
     params, offset, jac, residual, cost = _solve(data, chosen, prior, force_offset_n, free, how)
     # a parameter the data leave undetermined is fixed at its prior, and the rest refitted (until
     # none is left; the default log-R fit keeps its three rounds, so that it is unchanged)
-    rounds = 3 if objective == "log_r" and not fit_force_offset else len(free)
+    rounds = 3 if objective is Objective.LOG_R and not fit_force_offset else len(free)
     for _ in range(rounds):
         sigma = _sigma(jac, residual, len(free))
         loose = [n for n, s in zip(free, sigma, strict=True) if not (s < _loose_sigma(n, data))]

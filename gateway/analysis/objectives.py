@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from enum import StrEnum
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,7 +52,6 @@ LINEAR_PARAMETERS: dict[str, float] = {
 }
 #: log-space half-width of the bounds: a factor of 1000 either way of the prior.
 LOG_BOUND = math.log(1e3)
-OBJECTIVES = ("log_r", "force")
 #: name of the reference-force zero offset in estimates and correlations (not a SensorParams field)
 OFFSET = "force_offset_n"
 #: the offset is fitted as offset / OFFSET_SCALE
@@ -63,10 +63,29 @@ FORCE_F_SCALE_SHARE = 0.05
 SENSITIVITY_FLOOR_SHARE = 0.01
 
 
-def check_objective(objective: str) -> str:
-    if objective not in OBJECTIVES:
-        raise ValueError(f"objective must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
-    return objective
+class Objective(StrEnum):
+    """What the physical model's fit minimises: log-resistance residuals, force residuals
+    (started from the log-R fit), or both, keeping the one that reads held-out force better."""
+
+    AUTO = "auto"
+    LOG_R = "log_r"
+    FORCE = "force"
+
+    @property
+    def option(self) -> str:
+        """The command line's spelling (``log-r``)."""
+        return self.value.replace("_", "-")
+
+
+#: The objectives one fit minimises (``auto`` chooses between two fits; it is none itself).
+FIT_OBJECTIVES = (Objective.LOG_R, Objective.FORCE)
+
+
+def check_objective(objective: str) -> Objective:
+    """``objective`` as one of ``FIT_OBJECTIVES``; ``ValueError`` naming them otherwise."""
+    if objective not in FIT_OBJECTIVES:
+        raise ValueError(f"objective must be one of {', '.join(FIT_OBJECTIVES)}, got {objective!r}")
+    return Objective(objective)
 
 
 def full_scale(force_n: FloatArray, usable: BoolArray) -> float:
@@ -78,7 +97,7 @@ def full_scale(force_n: FloatArray, usable: BoolArray) -> float:
 
 def f_scale(objective: str, force_n: FloatArray, usable: BoolArray) -> float:
     """The soft-L1 scale: 0.05 in ln R, or 5 % of full scale in newtons."""
-    if check_objective(objective) == "log_r":
+    if check_objective(objective) is Objective.LOG_R:
         return LOG_R_F_SCALE
     return FORCE_F_SCALE_SHARE * full_scale(force_n, usable)
 
@@ -206,7 +225,7 @@ class Problem:
     def residual(self, x: FloatArray) -> FloatArray:
         try:
             params, offset = self.params(x), self.offset(x)
-            if self.objective == "force":
+            if self.objective is Objective.FORCE:
                 return self._force_residual(params, offset)
             res = self.log_residual(params, offset)[self.train]
         except ValueError:

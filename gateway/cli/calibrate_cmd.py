@@ -8,10 +8,10 @@ from pathlib import Path
 import click
 
 from ..analysis.calibration import (
-    MODELS,
     OBJECTIVE_OPTIONS,
-    OFFSET_CHOICES,
     Calibration,
+    CalibrationModel,
+    OffsetMode,
     calibrate,
     format_report,
     write_calibration,
@@ -34,7 +34,7 @@ from .common import parse_assignments
 @click.option("--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), help="calibration TOML")
 @click.option(
     "--model",
-    type=click.Choice(MODELS),
+    type=click.Choice([m.value for m in CalibrationModel]),
     default="physics",
     show_default=True,
     help="the channel's model to write: the physical model, the conductance line, a monotone lookup, "
@@ -52,7 +52,7 @@ from .common import parse_assignments
 @click.option(
     "--force-offset",
     "force_offset",
-    type=click.Choice(OFFSET_CHOICES),
+    type=click.Choice([o.value for o in OffsetMode]),
     default="auto",
     show_default=True,
     help="reference-force zero offset (the model is driven by F_ref + offset): fit it, leave it out, or "
