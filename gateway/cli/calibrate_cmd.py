@@ -419,5 +419,6 @@ def _check_effects(
         raise _Refused(
             f"refused, {config_path} is unchanged: the channels were fitted with different effects "
             f"({listed}), and {cal_path} names one list ([meta] effects), which the gateway reads every "
-            "calibrated channel with; calibrate the channels with the same --effects"
+            "calibrated channel with (a channel gets hysteresis only where it reads held-out force better): "
+            "name hysteresis in --effects, so that every channel has it"
         )

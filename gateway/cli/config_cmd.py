@@ -378,10 +378,13 @@ def _edit(config_path: Path, name: str, device_name: str | None, assignments: Se
 @config_option
 @_device_option
 def set_cmd(name: str, assignments: tuple[str, ...], config_path: Path, device_name: str | None) -> None:
-    """Set channel settings: name, x_mm, y_mm, enabled, effects (comma list), or a sensor parameter.
+    """Set channel settings: name, x_mm, y_mm, enabled, effects (comma list), override (comma
+    list), or a sensor parameter.
 
-    Sensor parameters (e.g. r0_ohm=190000) go into the channel's params table. The file is
-    rewritten only if the result is a valid configuration.
+    Sensor parameters (e.g. r0_ohm=190000) go into the channel's params table. On a calibrated
+    channel a value other than the calibration's is refused unless the entry overrides it
+    (override=r0_ohm: the entry's list, replaced). The file is rewritten only if the result is
+    a valid configuration.
     """
     try:
         parsed = [parse_assignment(pair) for pair in assignments]

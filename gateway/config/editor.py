@@ -4,8 +4,9 @@ The file is edited with tomlkit, so the operator's comments and layout stay; the
 is validated with ``parse_config`` before anything is written, and the write is atomic. An
 edit that would make the configuration invalid (or would not take effect) is refused with a
 ``ConfigError`` and leaves the file byte for byte as it was. Keys: ``name``, ``x_mm``,
-``y_mm`` (mm), ``enabled``, ``effects`` (comma list), or any sensor parameter (into the
-channel's ``params`` table). ``ParameterSources`` tells where each resolved parameter of a
+``y_mm`` (mm), ``enabled``, ``effects`` (comma list), ``override`` (comma list: the entry's keys
+that win over a calibration, ``overrides``), or any sensor parameter (into the channel's
+``params`` table). ``ParameterSources`` tells where each resolved parameter of a
 channel comes from: default, device, calibration file or channel.
 """
 
@@ -27,7 +28,7 @@ from ..atomic import atomic_write_text
 from ..errors import ConfigError
 from ..keys import check_keys
 from ..model import UnknownEffectError, parameter_names, parse_effects
-from .overrides import DEVICE_OVERRIDE_KEY
+from .overrides import DEVICE_OVERRIDE_KEY, OVERRIDE_KEY
 from .parser import parse_config
 from .schema import BusConfig, ChannelConfig, DeviceConfig, GatewayConfig
 from .tables import read_text_file
@@ -172,8 +173,9 @@ def parse_assignment(pair: str) -> Assignment:
     key = key.strip()
     if not sep or not key:
         raise ConfigError(f"{pair!r} is not KEY=VALUE")
-    allowed = [*PLAIN_KEYS, *parameter_names()]
-    check_keys([key], allowed, lambda _key, message: ConfigError(message), _UNKNOWN_KEY, shown=PLAIN_KEYS)
+    allowed = [*PLAIN_KEYS, OVERRIDE_KEY, *parameter_names()]
+    shown = (*PLAIN_KEYS, OVERRIDE_KEY)
+    check_keys([key], allowed, lambda _key, message: ConfigError(message), _UNKNOWN_KEY, shown=shown)
     if key == "name":
         return Assignment(key, tomlkit.item(text.strip()), text.strip())
     if key == "enabled":
@@ -188,6 +190,11 @@ def parse_assignment(pair: str) -> Assignment:
         array = tomlkit.array()
         array.extend(names)
         return Assignment(key, array, canonical)
+    if key == OVERRIDE_KEY:
+        names = [n.strip() for n in text.split(",") if n.strip()]
+        array = tomlkit.array()
+        array.extend(names)  # the parser checks the names against the entry's own keys
+        return Assignment(key, array, tuple(names))
     item = _parse_number(key, text)
     return Assignment(key, item, float(item.unwrap()))
 
@@ -255,7 +262,7 @@ def _set_param(entry: Any, key: str, value: Item) -> None:
 
 def _apply(entry: Any, assignments: Sequence[Assignment]) -> None:
     for assignment in assignments:
-        if assignment.key in PLAIN_KEYS:
+        if assignment.key in PLAIN_KEYS or assignment.key == OVERRIDE_KEY:
             entry[assignment.key] = assignment.item
         else:
             _set_param(entry, assignment.key, assignment.item)
@@ -264,6 +271,8 @@ def _apply(entry: Any, assignments: Sequence[Assignment]) -> None:
 def _took_effect(channel: ChannelConfig, assignment: Assignment) -> bool:
     """Whether the re-parsed channel shows the edit (a safety net against a misplaced edit)."""
     key = assignment.key
+    if key == OVERRIDE_KEY:
+        return True  # not part of the resolved channel; the parser checked it names the entry's keys
     actual = getattr(channel, key) if key in PLAIN_KEYS else getattr(channel.params, key)
     return bool(actual == assignment.expected)
 

@@ -81,3 +81,26 @@ def test_check_config_refuses_a_contradiction_without_override(tmp_path: Path) -
         "channel tip: bus[0].device[0].channel[0].params.r0_ohm = 190000.0 in the config, 187500.0 in the "
         f"calibration ({tmp_path / 'cal.toml'} [channel.tip] r0_ohm)"
     ) in result.output
+
+
+def test_channels_set_on_a_calibrated_channel_needs_the_override(tmp_path: Path) -> None:
+    (tmp_path / "cal.toml").write_text(CAL)
+    config = tmp_path / "gateway.toml"
+    text = CONFIG.replace('override_calibration = ["effects"]\n', "").replace(
+        'effects = ["tunneling", "contact", "creep"]\n', ""
+    )
+    text = text.replace('params = { r0_ohm = 190000.0 }\noverride = ["r0_ohm"]\n', "")
+    config.write_text(text)
+    refused = CliRunner().invoke(main, ["channels", "set", "tip", "r0_ohm=2e5", "-c", str(config)])
+    assert refused.exit_code == 2 and config.read_text() == text
+    assert "channel[0].params.r0_ohm = 200000.0 in the config, 187500.0 in the calibration" in refused.output
+    result = CliRunner().invoke(
+        main, ["channels", "set", "tip", "r0_ohm=2e5", "override=r0_ohm", "-c", str(config)]
+    )
+    assert result.exit_code == 0, result.output
+    assert 'r0_ohm = 2e5, override = ["r0_ohm"]' in result.output
+    listed = CliRunner().invoke(main, ["check-config", "-c", str(config)])
+    assert (
+        "      tip: r0_ohm = 200000.0 (bus[0].device[0].channel[0].params.r0_ohm) over the calibrated "
+        "187500.0"
+    ) in listed.output

@@ -52,7 +52,7 @@ def test_the_readers_messages_are_unchanged(tmp_path: Path) -> None:
         parse_assignment("x_m=1")
     assert str(editor.value) == (
         "unknown key 'x_m'; did you mean 'x_mm'? "
-        "(allowed: name, x_mm, y_mm, enabled, effects, or a sensor parameter such as r0_ohm)"
+        "(allowed: name, x_mm, y_mm, enabled, effects, override, or a sensor parameter such as r0_ohm)"
     )
     web = tmp_path / "web.yml"
     web.write_text("bogus: 1\n", encoding="utf-8")
