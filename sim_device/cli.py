@@ -10,6 +10,7 @@ Examples::
     tactile-sim run --map skin60 --rtu /dev/ttyUSB0 --baud 4000000 --scenario cycles
     tactile-sim scenarios
     tactile-sim fsr-record fsr.csv --runs 3 --protocol calibration --seed 2
+    tactile-sim fsr-record slow.csv --preset real-like --protocol slow-loading --runs 1
 
 SIGINT and SIGTERM stop the server cleanly (a recording is closed as a valid file).
 """
@@ -22,7 +23,7 @@ import math
 import signal
 import sys
 from collections.abc import AsyncIterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -38,7 +39,7 @@ from .config import (
     parse_world_effects,
 )
 from .faults import FaultError
-from .fsr_emulator import PROTOCOLS, FsrEmulator, FsrParams, write_record
+from .fsr_emulator import PRESETS, PROTOCOLS, REAL_LIKE_SAMPLE_INTERVAL_S, FsrEmulator, write_record
 from .maps import VENDOR_MAPS
 from .modbus_server import ServerStartError, SimServer, serve_serial, serve_tcp, serve_tls
 from .record import Recorder, array_metadata
@@ -127,18 +128,48 @@ def scenarios_cmd() -> None:
 @click.option("--wear-per-cycle", type=float, default=0.0, show_default=True, help="Loss of k per loading.")
 @click.option("--rate-gain-s", type=float, default=0.0, show_default=True, help="Rate dependence, s.")
 @click.option("--humidity", type=float, default=0.0, show_default=True, help="Drift amplitude, relative.")
+@click.option(
+    "--preset",
+    type=click.Choice(list(PRESETS)),
+    default="default",
+    show_default=True,
+    help="The emulated sensor: real-like (creep, a set that recovers slowly, 2x run-to-run "
+    "sensitivity, a lagging load cell) or fast-creep (docs/fsr-emulator.md).",
+)
+@click.option(
+    "--sample-interval-s",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help=f"Sampling interval, s [default: 0.1; {REAL_LIKE_SAMPLE_INTERVAL_S:g} within bursts for the "
+    "real-like and fast-creep presets].",
+)
 def fsr_record_cmd(
-    out: str, runs: int, seed: int, protocol: str, wear_per_cycle: float, rate_gain_s: float, humidity: float
+    out: str,
+    runs: int,
+    seed: int,
+    protocol: str,
+    wear_per_cycle: float,
+    rate_gain_s: float,
+    humidity: float,
+    preset: str,
+    sample_interval_s: float | None,
 ) -> None:
     """Write a record of an emulated FSR (sim_device.fsr_emulator), not of the paper's model."""
+    if sample_interval_s is None:
+        sample_interval_s = 0.1 if preset == "default" else REAL_LIKE_SAMPLE_INTERVAL_S
     try:
-        params = FsrParams(wear_per_cycle=wear_per_cycle, rate_gain_s=rate_gain_s, humidity=humidity)
-        records = FsrEmulator(params, seed).run_many(PROTOCOLS[protocol](), runs)
-        path = write_record(out, records)
+        params = replace(
+            PRESETS[preset](), wear_per_cycle=wear_per_cycle, rate_gain_s=rate_gain_s, humidity=humidity
+        )
+        records = FsrEmulator(params, seed).run_many(PROTOCOLS[protocol](), runs, sample_interval_s)
+        path = write_record(out, records, metadata={"preset": preset} if preset != "default" else None)
     except (ValueError, OSError) as exc:
         raise click.ClickException(str(exc)) from None
     rows = sum(r.n_samples for r in records)
-    click.echo(f"tactile-sim: wrote {path}: {runs} run(s) of protocol {protocol}, {rows} rows, seed {seed}")
+    named = f", preset {preset}" if preset != "default" else ""
+    click.echo(
+        f"tactile-sim: wrote {path}: {runs} run(s) of protocol {protocol}, {rows} rows, seed {seed}{named}"
+    )
 
 
 @main.command("run")

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-from .fsr_params import FloatArray, FsrParams
+from .fsr_params import CreepElement, FloatArray, FsrParams
 from .fsr_protocol import Protocol
 
 
@@ -107,6 +107,8 @@ def dynamics(p: FsrParams, protocol: Protocol, t: FloatArray) -> Dynamics:
             plays[lo:hi] = play
     states = (force[:, None] - plays) / widths
     hyst = -p.hysteresis_amplitude * (states @ p.weights())
+    for element in p.creep_chain:
+        creep += chain_element_states(element, knot_t, knot_f, t, bounds)
     return Dynamics(force, force + creep, hyst, slope, cycle_no, cycles)
 
 
@@ -124,3 +126,50 @@ def _with_threshold_crossings(
     forces = np.concatenate((knot_f, np.full(tc.size, threshold_n)))
     order = np.argsort(times, kind="stable")
     return times[order], forces[order]
+
+
+def chain_element_states(
+    element: CreepElement, knot_t: FloatArray, knot_f: FloatArray, t: FloatArray, bounds: NDArray[np.intp]
+) -> FloatArray:
+    """The state x (N) of one creep-chain element at the samples ``t``, exactly.
+
+    On a piece of the protocol with slope s the gap ``d = a F - x`` obeys
+    ``dd/dt = a s - d / tau``, so with one time constant ``d(u) = d0 e^(-u/tau) + a s tau
+    (1 - e^(-u/tau))`` after u seconds on the piece. It charges (tau = tau_load) while
+    ``sign(a) d > 0`` and recovers (tau = tau_recovery) while ``sign(a) d < 0``; d is monotone
+    on a piece, so it changes regime at most once, where d = 0:
+    ``u* = tau ln(1 - d0 / (a s tau))``, and goes on from 0 with the other time constant.
+    ``bounds[j]`` is the first sample at or after knot j (the last bound is ``t.size``).
+    """
+    a = element.amplitude
+    out = np.zeros(t.size)
+    if a == 0.0:
+        return out
+    sign = 1.0 if a > 0 else -1.0
+    x = 0.0
+    for j in range(knot_t.size - 1):
+        t0, f0, f1 = knot_t[j], knot_f[j], knot_f[j + 1]
+        length = knot_t[j + 1] - t0
+        s = (f1 - f0) / length
+        d0 = a * f0 - x
+        charging = sign * d0 > 0.0 or (d0 == 0.0 and s > 0.0)
+        tau = element.tau_load_s if charging else element.tau_recovery_s
+        other = element.tau_recovery_s if charging else element.tau_load_s
+        drift = a * s * tau  # d tends to a s tau on this piece
+        switch = math.inf
+        if d0 != 0.0 and drift != 0.0 and (d0 > 0.0) != (drift > 0.0):
+            switch = tau * math.log1p(-d0 / drift)
+        lo, hi = int(bounds[j]), int(bounds[j + 1])
+        u = np.append(t[lo:hi] - t0, length)
+        d = _gap(u, d0, a * s, tau, other, switch)
+        out[lo:hi] = a * (f0 + s * u[:-1]) - d[:-1]
+        x = a * f1 - float(d[-1])
+    return out
+
+
+def _gap(u: FloatArray, d0: float, drive: float, tau: float, other: float, switch: float) -> FloatArray:
+    """``d = a F - x`` after u seconds on a piece (``drive`` = a s, N/s): time constant
+    ``tau`` up to ``switch``, then ``other`` from d = 0."""
+    before = d0 * np.exp(-u / tau) - drive * tau * np.expm1(-u / tau)
+    after = -drive * other * np.expm1(-np.maximum(u - switch, 0.0) / other)
+    return np.asarray(np.where(u < switch, before, after))

@@ -2,9 +2,13 @@
 
 Records from this module are *not* produced by the gateway's physical model (tunneling +
 contact + creep, ``gateway/model``) nor by the simulated MIS array (``sim_device.sensor``):
-the sensor here is a generic power-law FSR with Burgers-like creep, Preisach-style
-hysteresis and run-to-run sensitivity changes, read by a 2-wire ohmmeter, with a load cell
-as the force reference. It imports nothing of ``gateway`` (numpy and scipy only).
+the sensor here is a generic power-law FSR with Burgers-like creep, a creep chain whose
+elements load and recover with different time constants, Preisach-style hysteresis and
+run-to-run sensitivity changes, read by a 2-wire ohmmeter, with a load cell as the force
+reference. It imports nothing of ``gateway`` (numpy and scipy only). The modules:
+``fsr_params`` (parameters), ``fsr_protocol`` (load histories), ``fsr_dynamics`` (creep,
+flow, hysteresis), ``fsr_record`` (runs and their record file), ``fsr_presets`` (named
+sensors, e.g. ``real_like_fsr()``); every public name is importable from here.
 
 Symbols and units
 -----------------
@@ -24,7 +28,7 @@ Symbols and units
 
 2. Creep on an effective force (Burgers-like)
     The static curve is evaluated at an effective force
-    ``F_eff = F + x1 + x2 + phi`` (N), where
+    ``F_eff = F + x1 + x2 + phi`` (N, plus the creep chain's states, 2b), where
 
     - two Kelvin elements relax towards a fraction of the applied force,
       ``dx_i/dt = (a_i F - x_i) / tau_i`` (``a_fast``, ``tau_fast_s``; ``a_slow``,
@@ -52,6 +56,20 @@ Symbols and units
     by the same formulas with h = t - t_node. The states at the samples are therefore exact
     and do not depend on the sampling times (nor, beyond rounding, on ``internal_step_s``).
 
+2b. Creep chain: loading and recovery time constants differ (``creep_chain``, off by default)
+    Each ``CreepElement`` (``amplitude`` a, ``tau_load_s``, ``tau_recovery_s``) adds a state
+    ``x`` (N, 0 at the start) to ``F_eff`` that relaxes towards ``a F``::
+
+        dx/dt = (a F - x) / tau,  tau = tau_load if |a F| > |x| (charging) else tau_recovery
+
+    A held step F from rest gives ``x = a F (1 - exp(-t/tau_load))``; a step down from a
+    charged ``x0`` to F' gives ``x = a F' + (x0 - a F') exp(-t/tau_recovery)``. With a > 0 the
+    element is creep (the reading rises under a held load); with a < 0 it is a *set*: after a
+    high load the sensor reads low at a lower load and recovers with ``tau_recovery``. The
+    update is exact on each linear piece of the protocol (the regime changes at most once
+    on a piece, at a time solved in closed form; ``fsr_dynamics.chain_element_states``).
+    ``F_eff <= 0`` (a large set at a low load) is no contact: G = 0.
+
 3. Rate-independent hysteresis (Preisach-style, play operators)
     Play (backlash) operators of half-widths ``r_j`` (``hysteresis_widths_n``, N) act on F:
     ``p_j <- max(F - r_j, min(F + r_j, p_j))``, ``p_j = 0`` at the start (virgin sensor).
@@ -71,10 +89,14 @@ Symbols and units
     -ln(M)/2, ln(M)/2))`` on k (``gain_sigma`` sigma_g, ``gain_max_ratio`` M: any two runs
     differ by at most M), an exponent ``n_run = n + sigma_n z2`` (``exponent_sigma``), a load
     cell zero offset ``sigma_0 z3`` (``load_cell_offset_sigma_n``) and a humidity phase
-    ``U(0, 2 pi)``; z ~ N(0, 1). The draws are kept in ``RunConditions``.
+    ``U(0, 2 pi)``; z ~ N(0, 1). The draws are kept in ``RunConditions``. ``run_gains``
+    (e.g. ``(1.0, 2.0)``) sets the gains instead: run r has ``run_gains[r % len]``; a gain
+    of 2 doubles G and so halves the sensor's resistance at every load.
 
 5. Two-wire ohmmeter
     The reading is ``(R + R_lead) (1 + sigma_R z)`` (``lead_ohm``, ``ohmmeter_noise_rel``),
+    or ``R + R_lead + z sqrt((sigma_R (R + R_lead))^2 + sigma_abs^2)`` with an absolute
+    noise ``sigma_abs`` (``ohmmeter_noise_ohm``, ohm rms) besides,
     quantised like a 4.5-digit auto-ranging meter (``ohmmeter_reading``): ranges of full
     scale ``R_min 10^j`` (``ohmmeter_min_range_ohm`` = 200 ohm, 2 k, 20 k, ... up to
     ``ohmmeter_max_range_ohm``), each read in ``ohmmeter_counts`` counts (20000: resolution
@@ -83,14 +105,17 @@ Symbols and units
     meter (no quantisation, no range limit).
 
 6. Load cell reference
-    ``force_n = F + offset_run + sigma_F z`` (``load_cell_noise_n``), rounded to
+    ``force_n = F(t - lag) + offset_run + sigma_F z`` (``load_cell_noise_n``; ``lag`` =
+    ``load_cell_lag_s``, default 0: the reference reads the force applied that long before
+    the resistance is read; F = 0 before the start), rounded to
     ``load_cell_resolution_n``; the indicator shows no negative force (readings below 0 are
     0, as the record format requires force_n >= 0).
 
 7. Timestamps
     ``t_0 = 0``, ``t_{i+1} = t_i + dt (1 + j u_i)``, u_i ~ U(-1, 1) (``jitter_fraction`` j < 1,
     dt = ``sample_interval_s``): strictly increasing, intervals within ``dt (1 +- j)``. The run
-    is sampled until the protocol's end.
+    is sampled until the protocol's end. In bursts (``burst_size`` B > 0): every B-th interval
+    is ``burst_gap_s + j dt u_i`` instead (B samples dt apart, then a gap).
 
 8. Out-of-catalogue effects (off by default; not in the gateway's effect catalogue)
     - ``wear_per_cycle`` w: during the m-th loading of the sensor (m = 1, 2, ..., counted at
@@ -103,21 +128,27 @@ Symbols and units
 
 The sensor's conductance is therefore::
 
-    G = g_run k (1 - w)^(m - 1) F_eff^n_run (1 + H) rate_factor humidity_factor  (F > F_th)
+    G = g_run k (1 - w)^(m - 1) F_eff^n_run (1 + H) rate_factor humidity_factor  (F > F_th, F_eff > 0)
 
 ``EmulatedRecord.static_resistance_ohm`` is ``1 / (g_run k F^n_run + 1/R_leak)`` (the run's
 static curve at the true force, no creep, hysteresis, wear, rate or humidity, no lead).
 
 Protocols (``Protocol``) are piecewise-linear load histories starting at 0 N, built from
 ``Ramp`` (to a level at a rate) and ``Hold`` steps; builders ``hold_protocol``,
-``staircase``, ``calibration_run``. ``write_record`` writes runs in the project's record
-format (``docs/record-format.md``), time continuing across runs.
+``staircase``, ``calibration_run``, ``alternating_holds`` (slow loading: holds at 25.5 N and
+3.3 N in turn) and ``calibration_ramp`` (one slow ramp to 49 N and a hold).
+``write_record`` writes runs in the project's record format (``docs/record-format.md``),
+time continuing across runs. ``EmulatedRecord.static_force_n()`` reads a resistance back
+through the run's static curve (a static lookup, as a reader without a creep model would).
 
 Example::
 
     emu = FsrEmulator(FsrParams(), seed=1)
     records = emu.run_many(calibration_run(), n_runs=3)
     write_record("fsr.csv", records)
+
+    real = FsrEmulator(real_like_fsr(), seed=1)
+    write_record("slow.csv", [real.run(alternating_holds(), 0, REAL_LIKE_SAMPLE_INTERVAL_S)])
 """
 
 from __future__ import annotations
@@ -129,13 +160,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .fsr_dynamics import dynamics
-from .fsr_params import FloatArray, FsrParams, RunConditions, require, require_finite
+from .fsr_params import CreepElement, FloatArray, FsrParams, RunConditions, require, require_finite
+from .fsr_presets import PRESETS, REAL_LIKE_SAMPLE_INTERVAL_S, fast_creep_fsr, real_like_fsr
 from .fsr_protocol import (
     DEFAULT_HOLD_LEVELS_N,
     PROTOCOLS,
     Hold,
     Protocol,
     Ramp,
+    alternating_holds,
+    calibration_ramp,
     calibration_run,
     hold_protocol,
     staircase,
@@ -144,7 +178,10 @@ from .fsr_record import EmulatedRecord, write_record
 
 __all__ = [
     "DEFAULT_HOLD_LEVELS_N",
+    "PRESETS",
     "PROTOCOLS",
+    "REAL_LIKE_SAMPLE_INTERVAL_S",
+    "CreepElement",
     "EmulatedRecord",
     "FsrEmulator",
     "FsrParams",
@@ -152,9 +189,13 @@ __all__ = [
     "Protocol",
     "Ramp",
     "RunConditions",
+    "alternating_holds",
+    "calibration_ramp",
     "calibration_run",
+    "fast_creep_fsr",
     "hold_protocol",
     "ohmmeter_reading",
+    "real_like_fsr",
     "staircase",
     "write_record",
 ]
@@ -216,14 +257,18 @@ class FsrEmulator:
         return np.random.default_rng(a), np.random.default_rng(b)
 
     def conditions(self, run_index: int, prior_cycles: int = 0) -> RunConditions:
-        """The run's sensitivity gain, exponent, load cell offset and humidity phase."""
+        """The run's sensitivity gain, exponent, load cell offset and humidity phase (the gain
+        is ``run_gains[run_index % len(run_gains)]`` when ``run_gains`` is given)."""
         p = self.params
         rng, _ = self._generators(run_index)
         z = rng.standard_normal(3)
         phase = float(rng.uniform(0.0, 2.0 * math.pi))
         half = 0.5 * math.log(p.gain_max_ratio)
+        gain = math.exp(min(max(p.gain_sigma * float(z[0]), -half), half))
+        if p.run_gains:
+            gain = p.run_gains[int(run_index) % len(p.run_gains)]
         return RunConditions(
-            gain=math.exp(min(max(p.gain_sigma * float(z[0]), -half), half)),
+            gain=gain,
             exponent=p.exponent + p.exponent_sigma * float(z[1]),
             load_cell_offset_n=p.load_cell_offset_sigma_n * float(z[2]),
             humidity_phase_rad=phase,
@@ -247,8 +292,19 @@ class FsrEmulator:
 
         # 7. timestamps
         duration = protocol.duration_s
-        n_max = math.ceil(duration / (sample_interval_s * (1.0 - p.jitter_fraction))) + 2
+        shortest = sample_interval_s * (1.0 - p.jitter_fraction)
+        if p.burst_size > 0:
+            jitter_s = p.jitter_fraction * sample_interval_s
+            require(
+                p.burst_gap_s > jitter_s,
+                f"burst_gap_s must be > jitter_fraction x sample_interval_s = {jitter_s:g} s, "
+                f"got {p.burst_gap_s!r}",
+            )
+            shortest = min(shortest, p.burst_gap_s - jitter_s)
+        n_max = math.ceil(duration / shortest) + 2
         steps = sample_interval_s * (1.0 + p.jitter_fraction * rng.uniform(-1.0, 1.0, n_max))
+        if p.burst_size > 0:
+            steps[p.burst_size - 1 :: p.burst_size] += p.burst_gap_s - sample_interval_s
         t = np.concatenate(([0.0], np.cumsum(steps)))
         t = t[t <= duration * (1.0 + 1e-12)]
         noise_r = rng.standard_normal(t.size)
@@ -270,19 +326,30 @@ class FsrEmulator:
         wear = (1.0 - p.wear_per_cycle) ** (np.maximum(cycle_no - 1, 0) + prior_cycles)
         rate = np.maximum(_MIN_RATE_FACTOR, 1.0 + p.rate_gain_s * slope / p.full_scale_n)
         humid = 1.0 + p.humidity * np.sin(2.0 * math.pi * t / p.humidity_period_s + cond.humidity_phase_rad)
-        g_dyn = gain * np.power(np.maximum(f_eff, 1e-300), cond.exponent) * (1.0 + hyst)
+        # a set (negative creep chain) can take F_eff to 0 or below: no contact, G = 0
+        contact = f_eff > 0.0
+        g_dyn = gain * np.power(np.where(contact, f_eff, 1.0), cond.exponent) * (1.0 + hyst)
+        g_dyn = np.where(contact, g_dyn, 0.0)
         g = np.where(loaded, g_dyn * wear * rate * humid, 0.0)
         r_sensor = _resistance(g, p.leakage_ohm)
         r_static = _resistance(g_static, p.leakage_ohm)
 
         # 5. ohmmeter
-        noisy = (r_sensor + p.lead_ohm) * np.maximum(1.0 + p.ohmmeter_noise_rel * noise_r, 1e-6)
+        if p.ohmmeter_noise_ohm > 0.0:
+            wired = r_sensor + p.lead_ohm
+            finite = np.isfinite(wired)
+            base = np.where(finite, wired, 0.0)
+            sigma = np.hypot(p.ohmmeter_noise_rel * base, p.ohmmeter_noise_ohm)
+            noisy = np.where(finite, np.maximum(base + sigma * noise_r, 1e-6 * base), np.inf)
+        else:
+            noisy = (r_sensor + p.lead_ohm) * np.maximum(1.0 + p.ohmmeter_noise_rel * noise_r, 1e-6)
         reading = ohmmeter_reading(
             noisy, p.ohmmeter_counts, p.ohmmeter_min_range_ohm, p.ohmmeter_max_range_ohm
         )
 
         # 6. load cell
-        cell = force + cond.load_cell_offset_n + p.load_cell_noise_n * noise_f
+        lagged = protocol.force_at(t - p.load_cell_lag_s) if p.load_cell_lag_s > 0.0 else force
+        cell = lagged + cond.load_cell_offset_n + p.load_cell_noise_n * noise_f
         if p.load_cell_resolution_n > 0.0:
             cell = np.round(cell / p.load_cell_resolution_n) * p.load_cell_resolution_n
         cell = np.maximum(cell, 0.0)

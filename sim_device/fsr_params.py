@@ -29,6 +29,29 @@ def require_finite(value: float, name: str, *, low: float | None = None, strict:
         require(not bad, f"{name} must be {'>' if strict else '>='} {low:g}, got {value!r}")
 
 
+@dataclass(frozen=True)
+class CreepElement:
+    """One element of the creep chain (section 2b): a Kelvin element whose state ``x`` (N)
+    relaxes towards ``amplitude * F`` with ``tau_load_s`` (s) while it charges (``|x|``
+    grows towards ``|amplitude| F``) and with ``tau_recovery_s`` (s) while it discharges.
+
+    ``amplitude`` is dimensionless, in (-1, 1): positive, creep (the sensor reads more and
+    more under a held load); negative, a set (the sensor reads less after a higher load).
+    """
+
+    amplitude: float
+    tau_load_s: float
+    tau_recovery_s: float
+
+    def __post_init__(self) -> None:
+        require_finite(self.amplitude, "creep element amplitude")
+        require(
+            -1.0 < self.amplitude < 1.0, f"creep element amplitude must be in (-1, 1), got {self.amplitude!r}"
+        )
+        require_finite(self.tau_load_s, "creep element tau_load_s", low=0.0, strict=True)
+        require_finite(self.tau_recovery_s, "creep element tau_recovery_s", low=0.0, strict=True)
+
+
 _POSITIVE: tuple[str, ...] = (
     "k_s",
     "exponent",
@@ -41,6 +64,7 @@ _POSITIVE += ("humidity_period_s", "ohmmeter_min_range_ohm", "gain_max_ratio")
 _NON_NEGATIVE: tuple[str, ...] = ("threshold_n", "a_fast", "a_slow", "hysteresis_amplitude", "gain_sigma")
 _NON_NEGATIVE += ("exponent_sigma", "lead_ohm", "ohmmeter_noise_rel", "load_cell_noise_n")
 _NON_NEGATIVE += ("load_cell_offset_sigma_n", "load_cell_resolution_n", "jitter_fraction")
+_NON_NEGATIVE += ("load_cell_lag_s", "burst_gap_s", "ohmmeter_noise_ohm")
 
 
 @dataclass(frozen=True)
@@ -59,6 +83,8 @@ class FsrParams:
     tau_slow_s: float = 100.0
     eta_flow_s: float = 2.0e4  # flow grows at F / eta while loaded (inf: no flow)
     tau_recovery_s: float = 200.0  # flow recovery time constant while unloaded
+    # 2b. creep chain: Kelvin elements that load and recover with different time constants
+    creep_chain: tuple[CreepElement, ...] = ()
     # 3. hysteresis
     hysteresis_amplitude: float = 0.07  # A: +-A at mid-range
     hysteresis_widths_n: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0)  # play half-widths
@@ -67,9 +93,11 @@ class FsrParams:
     gain_sigma: float = 0.15  # sigma of ln(gain)
     gain_max_ratio: float = 2.0  # gains of any two runs differ by at most this factor
     exponent_sigma: float = 0.02
+    run_gains: tuple[float, ...] = ()  # if given: run r's gain is run_gains[r % len], not drawn
     # 5. ohmmeter
     lead_ohm: float = 1.0
     ohmmeter_noise_rel: float = 0.005
+    ohmmeter_noise_ohm: float = 0.0  # added in quadrature to the relative noise, ohm rms
     ohmmeter_counts: int = 20000  # 0: ideal meter
     ohmmeter_min_range_ohm: float = 200.0
     ohmmeter_max_range_ohm: float = 20e6
@@ -77,9 +105,12 @@ class FsrParams:
     load_cell_noise_n: float = 0.02
     load_cell_offset_sigma_n: float = 0.03
     load_cell_resolution_n: float = 0.001  # 0: unrounded
+    load_cell_lag_s: float = 0.0  # the reference reads the force applied this long before
     # 7. sampling
     jitter_fraction: float = 0.2
     internal_step_s: float = 0.01
+    burst_size: int = 0  # samples per burst (0: no bursts); a burst_gap_s interval after each
+    burst_gap_s: float = 0.0
     # 8. out-of-catalogue effects (off by default)
     wear_per_cycle: float = 0.0
     rate_gain_s: float = 0.0
@@ -107,6 +138,19 @@ class FsrParams:
             self.ohmmeter_max_range_ohm >= self.ohmmeter_min_range_ohm,
             "ohmmeter_max_range_ohm must be >= ohmmeter_min_range_ohm",
         )
+        require(self.burst_size >= 0, f"burst_size must be >= 0 (0: no bursts), got {self.burst_size!r}")
+        require(
+            self.burst_size == 0 or self.burst_gap_s > 0.0,
+            f"burst_gap_s must be > 0 when burst_size is given, got {self.burst_gap_s!r}",
+        )
+        for g in self.run_gains:
+            require_finite(g, "run_gains", low=0.0, strict=True)
+        amplitudes = [self.a_fast, self.a_slow, *(e.amplitude for e in self.creep_chain)]
+        require(
+            1.0 + sum(amplitudes) > 0.0,
+            "the creep amplitudes (a_fast, a_slow and the chain's) must sum to more than -1, "
+            f"got {sum(amplitudes)!r}",
+        )
         require(len(self.hysteresis_widths_n) > 0, "hysteresis_widths_n must not be empty")
         for r in self.hysteresis_widths_n:
             require_finite(r, "hysteresis_widths_n", low=0.0, strict=True)
@@ -120,20 +164,24 @@ class FsrParams:
             require(sum(self.hysteresis_weights) > 0, "hysteresis_weights must not all be 0")
 
     def ideal_instruments(self) -> FsrParams:
-        """The same sensor read without noise, quantisation, zero offset or time jitter."""
+        """The same sensor read without noise, quantisation, zero offset, lag or time jitter."""
         return replace(
             self,
             ohmmeter_noise_rel=0.0,
+            ohmmeter_noise_ohm=0.0,
             ohmmeter_counts=0,
             load_cell_noise_n=0.0,
             load_cell_offset_sigma_n=0.0,
             load_cell_resolution_n=0.0,
             jitter_fraction=0.0,
+            load_cell_lag_s=0.0,
         )
 
     def static_only(self) -> FsrParams:
-        """The same sensor without creep, flow and hysteresis (its static curve only)."""
-        return replace(self, a_fast=0.0, a_slow=0.0, eta_flow_s=math.inf, hysteresis_amplitude=0.0)
+        """The same sensor without creep, flow, creep chain and hysteresis (its static curve only)."""
+        return replace(
+            self, a_fast=0.0, a_slow=0.0, eta_flow_s=math.inf, hysteresis_amplitude=0.0, creep_chain=()
+        )
 
     def out_of_catalogue(self) -> dict[str, float]:
         """The out-of-catalogue effects that are on, with their values."""

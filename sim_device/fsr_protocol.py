@@ -179,9 +179,53 @@ def calibration_run(
     return p
 
 
+def alternating_holds(
+    high_n: float = 25.5,
+    low_n: float = 3.3,
+    high_s: float = 20.0,
+    low_s: float = 10.0,
+    cycles: int = 12,
+    rate_n_per_s: float = 40.0,
+    *,
+    lead_s: float = 13.0,
+) -> Protocol:
+    """A slow-loading run: the sensor preloaded at ``low_n``, then ``cycles`` times a hold of
+    ``high_s`` at ``high_n`` followed by a hold of ``low_s`` at ``low_n``, never unloaded.
+
+    Ramp to ``low_n`` and hold ``lead_s``; each cycle ramps up to ``high_n`` and down to
+    ``low_n`` at ``rate_n_per_s`` (N/s). The run ends on the last low hold. Every low hold but
+    the lead follows a high one: what a sensor reads at a low load after a high load.
+    """
+    require(cycles >= 1, f"cycles must be >= 1, got {cycles}")
+    require(0.0 < low_n < high_n, f"need 0 < low_n < high_n, got low_n={low_n!r}, high_n={high_n!r}")
+    p = Protocol(name="slow-loading").ramp(low_n, rate_n_per_s).hold(lead_s)
+    for _ in range(cycles):
+        p = p.ramp(high_n, rate_n_per_s).hold(high_s).ramp(low_n, rate_n_per_s).hold(low_s)
+    return p
+
+
+def calibration_ramp(
+    max_n: float = 49.0,
+    rate_n_per_s: float = 0.125,
+    hold_s: float = 24.0,
+    unload_rate_n_per_s: float = 50.0,
+    *,
+    lead_s: float = 5.0,
+    rest_s: float = 2.0,
+) -> Protocol:
+    """A calibration by one slow ramp: rest ``lead_s``, ramp to ``max_n`` at ``rate_n_per_s``
+    (0.125 N/s: 392 s to 49 N), hold ``hold_s``, unload at ``unload_rate_n_per_s``, rest
+    ``rest_s``. The creep elements faster than the ramp stay near their equilibrium on it."""
+    require_finite(max_n, "max_n", low=0.0, strict=True)
+    p = Protocol(name="calibration-ramp").rest(lead_s).ramp(max_n, rate_n_per_s).hold(hold_s)
+    return p.unload(unload_rate_n_per_s).rest(rest_s)
+
+
 #: The protocols the command line offers, by name (each built with its defaults).
 PROTOCOLS: dict[str, Callable[[], Protocol]] = {
     "holds": hold_protocol,
     "calibration": calibration_run,
     "staircase": staircase,
+    "slow-loading": alternating_holds,
+    "calibration-ramp": calibration_ramp,
 }

@@ -10,6 +10,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from .fsr_params import FloatArray, FsrParams, RunConditions, require, require_finite
 
 
@@ -23,7 +25,7 @@ class EmulatedRecord:
     resistance_ohm: FloatArray  # the ohmmeter's reading (inf: open / over range)
     sensor_resistance_ohm: FloatArray  # the sensor's true resistance, without lead and meter
     static_resistance_ohm: FloatArray  # the run's static curve at the true force
-    effective_force_n: FloatArray  # F_eff = F + x1 + x2 + phi
+    effective_force_n: FloatArray  # F_eff = F + x1 + x2 + phi + the creep chain's states
     run: int
     conditions: RunConditions
     cycles: int  # loading cycles in this run
@@ -36,6 +38,21 @@ class EmulatedRecord:
     def n_samples(self) -> int:
         return int(self.time_s.size)
 
+    def static_force_n(self, resistance_ohm: FloatArray | None = None) -> FloatArray:
+        """The force (N) the run's static curve reads from a resistance (default: the ohmmeter's).
+
+        Inverts ``R = R_lead + 1 / (g_run k F^n_run + 1/R_leak)``: ``F = (G / (g_run k))^(1/n_run)``
+        with ``G = 1 / (R - R_lead) - 1/R_leak``; 0 where G <= 0 (open, or at the leakage).
+        This is a static lookup: what a reader without a creep model makes of the reading.
+        """
+        p, c = self.params, self.conditions
+        r = self.resistance_ohm if resistance_ohm is None else np.asarray(resistance_ohm, dtype=np.float64)
+        leak = 0.0 if math.isinf(p.leakage_ohm) else 1.0 / p.leakage_ohm
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = 1.0 / (r - p.lead_ohm) - leak
+        g = np.where(np.isfinite(g) & (g > 0.0), g, 0.0)
+        return np.asarray(np.power(g / (c.gain * p.k_s), 1.0 / c.exponent))
+
 
 def _describe(p: FsrParams, sample_interval_s: float) -> dict[str, str]:
     effects = p.out_of_catalogue()
@@ -43,20 +60,32 @@ def _describe(p: FsrParams, sample_interval_s: float) -> dict[str, str]:
     if "humidity" in effects:
         parts[-1] += f" (period {p.humidity_period_s:g} s)"
     counts = f"{p.ohmmeter_counts} counts per range" if p.ohmmeter_counts else "ideal (no quantisation)"
-    return {
+    absolute = f" (+ {p.ohmmeter_noise_ohm:g} ohm rms)" if p.ohmmeter_noise_ohm > 0.0 else ""
+    lag = f", lag {p.load_cell_lag_s:g} s behind the sensor" if p.load_cell_lag_s > 0.0 else ""
+    bursts = ""
+    if p.burst_size > 0:
+        bursts = f", in bursts of {p.burst_size} samples, {p.burst_gap_s:g} s between bursts"
+    described = {
         "force_reference": (
             f"emulated load cell, noise {p.load_cell_noise_n:g} N rms, zero offset per run "
             f"(sigma {p.load_cell_offset_sigma_n:g} N), resolution {p.load_cell_resolution_n:g} N, "
-            "no negative readings"
+            f"no negative readings{lag}"
         ),
         "ohmmeter": (
-            f"2-wire, leads {p.lead_ohm:g} ohm included, {100 * p.ohmmeter_noise_rel:g} % rms noise, "
+            f"2-wire, leads {p.lead_ohm:g} ohm included, "
+            f"{100 * p.ohmmeter_noise_rel:g} % rms noise{absolute}, "
             f"{counts}, auto-ranging {p.ohmmeter_min_range_ohm:g} .. {p.ohmmeter_max_range_ohm:g} ohm, "
             "open and over range as inf"
         ),
-        "sample_interval_s": f"{sample_interval_s:g} (jitter +-{100 * p.jitter_fraction:g} %)",
+        "sample_interval_s": f"{sample_interval_s:g} (jitter +-{100 * p.jitter_fraction:g} %){bursts}",
         "out_of_catalogue": ", ".join(parts) if parts else "none",
     }
+    if p.creep_chain:
+        described["creep_chain"] = "; ".join(
+            f"a={e.amplitude:+g} tau_load={e.tau_load_s:g} s tau_recovery={e.tau_recovery_s:g} s"
+            for e in p.creep_chain
+        )
+    return described
 
 
 def _joined(values: Sequence[object]) -> str:
