@@ -19,8 +19,10 @@ gateway would have read it live with the calibration in its device configuration
   from a contact open at rest.
 
 Hold statistics (``channel_errors``): the RMS error of the tracked and of the static force
-against the reference, overall and, for each hold of the reference (``holds.find_holds``),
-the mean error over its first and last 10 % of rows (``Hold.edges``).
+against the reference, overall and, for each hold of the reference, the one per-hold measure
+``calibrate`` ranks by (``holds.hold_drifts``): the mean error over the first and last 10 % of
+its settled rows, whether it comes right after a higher load, and the drift (end minus start)
+summed up in those two groups (``holds.drift_groups_pct``, % of the channel's full scale).
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from ..errors import GatewayError
 from ..runtime.processor import DeviceProcessor
 from ..runtime.replay import ChannelSeries, ReplayedChannel, replay
 from ..runtime.snapshot import STATUS_LABELS, ChannelStatus
-from .holds import EDGE_FRACTION, MIN_HOLD_S, Hold, find_holds
+from .holds import EDGE_FRACTION, MIN_HOLD_S, DriftGroups, Hold, drift_groups_pct, find_holds, hold_drifts
 from .records import ChannelRecord, Record, RecordWriter, write_record
 
 __all__ = [
@@ -276,8 +278,9 @@ class ErrorSummary:
 
 @dataclass(frozen=True)
 class HoldError:
-    """One hold of the reference force and the mean force error (force - reference, N) over
-    its first and last ``EDGE_FRACTION`` of rows (``edge_rows`` each), tracked and static."""
+    """One hold of the reference force (its settled rows) and the mean force error (force -
+    reference, N) over its first and last ``EDGE_FRACTION`` of rows (``edge_rows`` each),
+    tracked and static; ``after_higher``: it comes right after a higher load."""
 
     hold: Hold
     edge_rows: int
@@ -285,10 +288,12 @@ class HoldError:
     tracked_end_n: float
     static_start_n: float
     static_end_n: float
+    after_higher: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         h = self.hold
         return {
+            "after_higher_load": self.after_higher,
             "start_s": h.start_s,
             "end_s": h.end_s,
             "level_n": h.level_n,
@@ -301,9 +306,13 @@ class HoldError:
 
 @dataclass(frozen=True)
 class ChannelErrors:
+    """A channel's errors: overall, per hold, and the hold drift in its two groups (% FS)."""
+
     channel: str
     overall: ErrorSummary
     holds: tuple[HoldError, ...]
+    drift_tracked: DriftGroups | None = None
+    drift_static: DriftGroups | None = None
 
 
 def _num(value: float) -> float | None:
@@ -335,31 +344,28 @@ def channel_errors(
     channel: AppliedChannel,
     tolerance_n: float | None = None,
     min_hold_s: float = MIN_HOLD_S,
-    edge_fraction: float = EDGE_FRACTION,
 ) -> ChannelErrors | None:
     """The channel's RMS errors (rows where both forces have a value) and its holds' start and
-    end errors; None when the record has no reference force."""
+    end errors and drift groups (``holds.hold_drifts``); None without a reference force."""
     rec = channel.record
     if rec.force_n is None:
         return None
     ref = rec.force_n
-    holds = []
-    for hold in find_holds(rec.time_s, ref, tolerance_n, min_hold_s):
-        first, last = hold.edges(edge_fraction)
-        err_t = channel.force_tracked_n - ref
-        err_s = channel.force_static_n - ref
-        holds.append(
-            HoldError(
-                hold,
-                hold.edge_rows(edge_fraction),
-                _mean(err_t[first]),
-                _mean(err_t[last]),
-                _mean(err_s[first]),
-                _mean(err_s[last]),
-            )
+    found = find_holds(rec.time_s, ref, tolerance_n, min_hold_s)
+    tracked = hold_drifts(rec.time_s, ref, channel.force_tracked_n, None, found, tolerance_n)
+    static = hold_drifts(rec.time_s, ref, channel.force_static_n, None, found, tolerance_n)
+    holds = tuple(
+        HoldError(
+            t.hold, t.hold.edge_rows(EDGE_FRACTION), t.start_error_n, t.end_error_n, s.start_error_n,
+            s.end_error_n, t.after_higher,
         )
+        for t, s in zip(tracked, static, strict=True)
+    )  # fmt: skip
     summary = _summary(channel.force_tracked_n, channel.force_static_n, ref)
-    return ChannelErrors(channel.name, summary, tuple(holds))
+    full = summary.full_scale_n
+    return ChannelErrors(
+        channel.name, summary, holds, drift_groups_pct(tracked, full), drift_groups_pct(static, full)
+    )
 
 
 def overall_errors(applied: Applied) -> ErrorSummary | None:
@@ -395,11 +401,25 @@ def apply_report(applied: Applied, errors: Sequence[ChannelErrors | None]) -> di
                 "status": ch.status_counts(),
                 "errors": None if err is None else err.overall.as_dict(),
                 "holds": [] if err is None else [h.as_dict() for h in err.holds],
+                "hold_drift_pct_fs": None if err is None else _drift_dict(err),
             }
             for ch, err in zip(applied.channels, errors, strict=True)
         ],
         "overall": None if overall is None else overall.as_dict(),
     }
+
+
+def _drift_dict(err: ChannelErrors) -> dict[str, Any]:
+    """The hold drift groups (% FS) of the tracked and the static force."""
+    out: dict[str, Any] = {}
+    for name, groups in (("tracked", err.drift_tracked), ("static", err.drift_static)):
+        if groups is not None:
+            out[name] = {
+                "after_higher_load": _num(groups.after_higher_pct_fs),
+                "others": _num(groups.others_pct_fs),
+                "holds": {"after_higher_load": groups.after_higher_holds, "others": groups.other_holds},
+            }
+    return out
 
 
 def _n(value: float, spec: str = ".4f") -> str:
@@ -459,19 +479,30 @@ def format_apply_report(applied: Applied, errors: Sequence[ChannelErrors | None]
         return "\n".join(lines) + "\n"
     lines.append(
         f"holds: mean error (force - reference, N) over the first and the last {100 * EDGE_FRACTION:g} % "
-        "of each hold's rows (at least one)"
+        "of each hold's settled rows (at least one); after: right after a higher load"
     )
     table = [
-        ("channel", "start s", "end s", "level N", "rows", "tracked start", "tracked end", "static start",
-         "static end")
+        ("channel", "start s", "end s", "level N", "rows", "after", "tracked start", "tracked end",
+         "static start", "static end")
     ]  # fmt: skip
     for name, h in holds:
         table.append(
             (name, _n(h.hold.start_s, ".2f"), _n(h.hold.end_s, ".2f"), _n(h.hold.level_n, ".4g"),
-             str(h.hold.n_rows), _n(h.tracked_start_n, "+.4f"), _n(h.tracked_end_n, "+.4f"),
-             _n(h.static_start_n, "+.4f"), _n(h.static_end_n, "+.4f"))
+             str(h.hold.n_rows), "yes" if h.after_higher else "", _n(h.tracked_start_n, "+.4f"),
+             _n(h.tracked_end_n, "+.4f"), _n(h.static_start_n, "+.4f"), _n(h.static_end_n, "+.4f"))
         )  # fmt: skip
     lines += _table(table)
+    lines += ["", "hold drift (end minus start error, RMS over holds, % of full scale), as calibrate ranks:"]
+    for err in errors:
+        if err is None or err.drift_tracked is None or err.drift_static is None:
+            continue
+        tr, st = err.drift_tracked, err.drift_static
+        lines.append(
+            f"  {err.channel}: after a higher load ({tr.after_higher_holds} holds) tracked "
+            f"{_n(tr.after_higher_pct_fs, '.2f')}, static {_n(st.after_higher_pct_fs, '.2f')}; "
+            f"others ({tr.other_holds} holds) tracked {_n(tr.others_pct_fs, '.2f')}, static "
+            f"{_n(st.others_pct_fs, '.2f')}"
+        )
     return "\n".join(lines) + "\n"
 
 

@@ -58,6 +58,7 @@ from .candidates import held_out_drift, rank_candidates
 from .diagnostics import residual_axes
 from .discrepancy import decimate
 from .fitting import FitData, FitResult, fit_channel, invert_drift_corrected
+from .load_history import start_load
 from .measurement import noise_model, time_is_real
 from .objectives import OFFSET
 from .records import ChannelRecord, Record
@@ -163,9 +164,15 @@ def calibrate(
         )
     ranged = replace(prior, force_min_n=min(lo, hi * 0.999), force_max_n=hi)
     try_h = try_hysteresis and "hysteresis" not in chosen and has_both_directions(data)
-    runs = [_fit_objective(data, chosen, ranged, "log_r", force_offset, try_h, None)]
+    physics_data = _every_kth(data, PHYSICS_FIT_ROWS)
+    if physics_data is not data:
+        notes.append(
+            f"the physical model fitted on every {math.ceil(data.time_s.size / PHYSICS_FIT_ROWS)}th of "
+            f"those rows ({physics_data.time_s.size}); it is scored on all of them, as the gateway reads it"
+        )
+    runs = [_fit_objective(physics_data, chosen, ranged, "log_r", force_offset, try_h, None)]
     if objective != Objective.LOG_R:
-        runs.append(_fit_objective(data, chosen, ranged, "force", force_offset, try_h, runs[0]))
+        runs.append(_fit_objective(physics_data, chosen, ranged, "force", force_offset, try_h, runs[0]))
     for run in runs:
         notes += run.notes
     pick = runs[-1] if objective == Objective.FORCE else min(runs, key=lambda r: _rms(r.fit))
@@ -199,8 +206,9 @@ def calibrate(
     ] + [
         Score(c.name, c.held_out_force_rms_n, c.drift, c.n_parameters, c.channel.drift.active) for c in cands
     ]  # fmt: skip
-    starting = starting_load_n(data)
-    if starting > 0.0:
+    start = start_load(data.time_s, data.resistance_ohm, data.force_n)
+    starting = start.force_n if start.loaded else 0.0
+    if start.loaded:
         notes.append(
             f"the record starts loaded ({starting:.4g} N): every calibration is read from the "
             "equilibrium at its first load"
@@ -228,11 +236,30 @@ def calibrate(
         candidates=cands,
         scores=tuple(scores),
         starting_load_n=starting,
+        held_out_rows=int(np.count_nonzero(test)),
     )
     physics = physics_read_back(cal, small, meta)
     drift = held_out_drift(data, physics, fs)
     physics_score = Score("physics", _held_out_rms(physics, data), drift, fit.n_parameters, _dynamic(fit))
     return replace(cal, scores=(physics_score, *cal.scores))
+
+
+#: The physical model's fit (8 fits of a stiff model) uses at most this many rows; every
+#: calibration is scored on all the rows the candidates are fitted on.
+PHYSICS_FIT_ROWS = 1500
+
+
+def _every_kth(data: FitData, max_rows: int) -> FitData:
+    """``data`` itself, or every k-th row of it so that at most ``max_rows`` remain."""
+    n = data.time_s.size
+    if n <= max_rows:
+        return data
+    sl = slice(None, None, math.ceil(n / max_rows))
+    return FitData(
+        data.time_s[sl], data.resistance_ohm[sl], data.force_n[sl],
+        None if data.temperature_c is None else data.temperature_c[sl], data.usable[sl], data.held_out[sl],
+        None if data.sigma_log is None else data.sigma_log[sl],
+    )  # fmt: skip
 
 
 def _dynamic(fit: FitResult) -> bool:
@@ -243,21 +270,6 @@ def _held_out_rms(force_n: np.ndarray, data: FitData) -> float:
     err = (force_n - data.force_n)[data.test]
     err = err[np.isfinite(err)]
     return float(np.sqrt(np.mean(err * err))) if err.size else math.nan
-
-
-def starting_load_n(data: FitData) -> float:
-    """The load the record starts at (N): the mean reference force over its first second when
-    that lies above the hold tolerance (2 % of full scale), else 0 (it starts at rest)."""
-    t, f = data.time_s, data.force_n
-    if not t.size:
-        return 0.0
-    first = (t - t[0] <= 1.0) & np.isfinite(f)
-    if not first.any():
-        return 0.0
-    level = float(np.mean(f[first]))
-    finite = f[np.isfinite(f)]
-    tolerance = 0.02 * float(finite.max()) if finite.size else 0.0
-    return level if level > tolerance else 0.0
 
 
 def physics_read_back(cal: Calibration, channel: ChannelRecord, metadata: Mapping[str, str]) -> np.ndarray:

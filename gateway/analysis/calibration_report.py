@@ -118,7 +118,8 @@ def ranking_lines(cal: Calibration) -> list[str]:
     ref_after, ref_others = cal.static_drift_reference()
     best = cal.best
     out = [
-        f"ranking on held-out force ({cal.fit.n_test} rows, read as the gateway reads them, against F_ref);",
+        f"ranking on held-out force ({cal.held_out_rows or cal.fit.n_test} rows, read as the gateway reads "
+        "them, against F_ref);",
         "hold drift: end minus start error of each held-out hold, RMS, % of full scale, for holds right",
         f"after a higher load and the others (best static: {_pct(ref_after)}, {_pct(ref_others)}):",
         f"  {'calibration':<30} {'force RMS (N)':>13} {'after higher':>12} {'others':>8} {'parameters':>10}",

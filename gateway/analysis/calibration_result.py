@@ -6,8 +6,8 @@ read it (``Score``): held-out force RMS against the reference the channel will b
 (F_ref), and the held-out hold drift in two groups (``holds.hold_drifts``: right after a higher
 load, and the others; % of full scale). ``Calibration.best`` is the best on held-out force among
 the *writable* ones: a static calibration, or a dynamic one whose hold drift in neither group
-exceeds the best static rival's (the smallest of the static calibrations' in that group): a
-drift correction that makes holds worse than a static curve would is never written.
+exceeds the best static rival's or the static lookup's in that group: a drift correction that
+makes holds worse than a static curve would is never written.
 """
 
 from __future__ import annotations
@@ -153,6 +153,8 @@ class Calibration:
     range_margin_n: tuple[float, float] = (0.0, 0.0)
     #: the load the record starts at (N; 0 when it starts at rest)
     starting_load_n: float = 0.0
+    #: the held-out rows every calibration is scored on (the physical model may be fitted on fewer)
+    held_out_rows: int = 0
 
     def calibrated_range_n(self, kind: str = "physics") -> tuple[float, float]:
         """The range written as ``calibrated_min_n``/``calibrated_max_n`` (N) for a channel
@@ -187,18 +189,19 @@ class Calibration:
         return sorted(self.scores, key=lambda s: (_key(s.held_out_force_rms_n), s.n_parameters))
 
     def static_drift_reference(self) -> tuple[float, float]:
-        """The smallest held-out hold drift of the static calibrations, per group (% FS;
-        NaN: no static calibration has a hold in that group)."""
+        """The held-out hold drift a dynamic calibration must not exceed, per group (% FS): the
+        smaller of the best static rival's (best held-out force among the static calibrations)
+        and the static lookup's; NaN where neither has a hold in that group."""
+        rivals = [s for s in (self.best_static(), self.score("lookup")) if s is not None]
         out = []
         for group in (0, 1):
-            values = [s.drift.all_pct_fs[group] for s in self.scores if not s.dynamic]
-            finite = [v for v in values if math.isfinite(v)]
+            finite = [v for s in rivals if math.isfinite(v := s.drift.all_pct_fs[group])]
             out.append(min(finite) if finite else math.nan)
         return out[0], out[1]
 
     def writable(self) -> list[Score]:
         """The calibrations ``--model auto`` may write, best first: every static one, and each
-        dynamic one whose held-out hold drift exceeds the best static rival's in neither group."""
+        dynamic one whose held-out hold drift exceeds ``static_drift_reference`` in neither group."""
         reference = self.static_drift_reference()
         out = []
         for s in self.ranking():

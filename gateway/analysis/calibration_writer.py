@@ -70,6 +70,7 @@ def calibration_file(
     calibrations: Iterable[Calibration],
     model: CalibrationModel | str = CalibrationModel.PHYSICS,
     names: Mapping[str, str] | None = None,
+    chosen: Mapping[str, str] | None = None,
 ) -> CalibrationFile:
     """The calibration file of ``calibrations``: per channel (renamed by ``names``) a
     ``[channel.<name>]`` table (the physical model's parameters, its force range and the
@@ -90,7 +91,9 @@ def calibration_file(
     conversions: dict[str, ConversionTable] = {}
     for cal in items:
         name = rename.get(cal.channel, cal.channel)
-        kind = written_name(cal, model)
+        kind = (chosen or {}).get(cal.channel) or written_name(cal, model)
+        if chosen and cal.channel in chosen and cal.score(kind) is None:
+            raise ValueError(f"channel {cal.channel!r}: no calibration {kind!r} was scored")
         rms = cal.force_rms().get(kind, math.nan)
         params = {est.name: float(est.value) for est in cal.fit.estimates if est.name in known}
         # a rival reads F_ref, so its channel keeps the record's own range (widened by the noise)
@@ -143,11 +146,12 @@ def calibration_toml(
     calibrations: Iterable[Calibration],
     model: CalibrationModel | str = CalibrationModel.PHYSICS,
     names: Mapping[str, str] | None = None,
+    chosen: Mapping[str, str] | None = None,
 ) -> str:
     """The text of ``calibration_file(calibrations, model, names)`` (``docs/calibration.md``):
     the gateway's configuration reads its ``[channel.<name>]``, ``[line.<name>]``,
     ``[lookup.<name>]`` and ``[curve.<name>]`` tables (``config.calibration_file``)."""
-    return calibration_file(calibrations, model, names).to_toml()
+    return calibration_file(calibrations, model, names, chosen).to_toml()
 
 
 def write_calibration(
@@ -155,6 +159,8 @@ def write_calibration(
     calibrations: Iterable[Calibration],
     model: str = "physics",
     names: Mapping[str, str] | None = None,
+    chosen: Mapping[str, str] | None = None,
 ) -> None:
-    """Write the calibration file atomically."""
-    atomic_write_text(path, calibration_toml(calibrations, model, names))
+    """Write the calibration file atomically; ``chosen``: per channel, the calibration to write
+    by its name in the ranking (overrides ``model``)."""
+    atomic_write_text(path, calibration_toml(calibrations, model, names, chosen))

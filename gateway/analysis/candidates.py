@@ -17,12 +17,15 @@ Fitting one candidate (the reference force drives the state, as in the physical 
    curve's own reading;
 2. the static curve is fitted to (x, R) on the training rows (force-space least squares for
    the power law and the line; pooled adjacent violators for the lookup);
-3. with the curve's x_hat = curve(R), the fractions a1, a2, beta solve the non-negative least
-   squares x_hat - F = a1 K1 + a2 K2 + beta F s (physical signs: a reading creeps up under
-   load and reads high on unloading); the time constants (loading, and recovery as a multiple
-   of it) and the play width are chosen on a grid by the training residual, then steps 2-3
-   alternate a few times. Only time constants the record resolves are tried: at least
-   ``TAU_MIN_STEPS`` sample steps and at most half the record's duration;
+3. with the curve's x_hat = curve(R), the fractions a1, a2, beta solve the bounded linear least
+   squares x_hat - F = a1 K1 + a2 K2 + beta F s. Each creep fraction lies in
+   ``CREEP_FRACTION_BOUNDS``: a reading may creep up (a > 0) or relax (a < 0: a real FSR's
+   conductance can fall under a held high load and rise again at a low one), but the settled
+   reading 1 + a1 + a2 stays at least 0.2 of the applied force, so that it rises with force;
+   the time constants (loading, and recovery as a multiple of it) and the play width are chosen
+   on a grid by the training residual, then steps 2-3 alternate a few times. Only time
+   constants the record resolves are tried: at least ``TAU_MIN_STEPS`` sample steps and at
+   most half the record's duration;
 4. for the power law and the line, the curve's two parameters and the fractions are then
    solved together from there (one least-squares problem; the time constants, the width and
    the play's directions stay): the alternation alone moves slowly along the curve's gain,
@@ -49,7 +52,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares, nnls
+from scipy.optimize import least_squares, lsq_linear
 
 from ..model.calibrated import LINE_ZERO_MARGIN, CurveChannel
 from ..model.drift import DRIFT_FORMS, PLAY_SHARES, Drift, kelvin_unit_series, play_direction_series
@@ -69,6 +72,12 @@ WIDTH_GRID_FS = (0.02, 0.05, 0.1, 0.2)  # play width as a share of the record's 
 ALTERNATIONS = 3
 #: A time constant must span this many median sample steps to be resolved by the record.
 TAU_MIN_STEPS = 5.0
+#: Each creep fraction's bounds: two at the lower bound still leave 1 + a1 + a2 = 0.2.
+CREEP_FRACTION_BOUNDS = (-0.4, 5.0)
+HYSTERESIS_BOUNDS = (-0.9, 0.9)
+#: The sensitivity element's c (1/N) times the full scale: at the top of the range the settled
+#: reading F exp(c F) still rises with F (c F > -1) and at most doubles per full scale.
+SENSITIVITY_BOUNDS_FS = (-0.8, 0.7)
 
 
 @dataclass(frozen=True)
@@ -227,11 +236,13 @@ GridPoint = tuple[float, float, float, float]
 def _grid(reg: _Regressors, form: str, noise_n: float = 0.0) -> list[GridPoint]:
     """The grid points to try for a drift form (unused values at their defaults); only time
     constants the record resolves (``_Regressors.resolved``)."""
-    elements, hyst = DRIFT_FORMS[form]
+    elements, hyst, sens = DRIFT_FORMS[form]
     d = Drift()
-    tau1s = tuple(t for t in TAU1_GRID_S if reg.resolved(t)) if elements >= 1 else (d.creep_tau_s,)
+    # the first time constant: the first creep element's, or the sensitivity element's
+    first = elements >= 1 or sens
+    tau1s = tuple(t for t in TAU1_GRID_S if reg.resolved(t)) if first else (d.creep_tau_s,)
     tau2s = tuple(t for t in TAU2_GRID_S if reg.resolved(t)) if elements >= 2 else (d.creep2_tau_s,)
-    factors = RECOVERY_FACTORS if elements else (1.0,)
+    factors = RECOVERY_FACTORS if first else (1.0,)
     widths: tuple[float, ...] = (d.hysteresis_width_n,)
     if hyst:
         narrowest = min(PLAY_SHARES)
@@ -251,21 +262,42 @@ def _grid(reg: _Regressors, form: str, noise_n: float = 0.0) -> list[GridPoint]:
 def _drift_at(form: str, grid: GridPoint, values: Sequence[float]) -> Drift:
     """The drift of ``form`` at a grid point with fractions ``values`` (a1, a2, beta as used);
     a form's own terms stay on (a fitted zero would make it another form)."""
-    elements, hyst = DRIFT_FORMS[form]
+    elements, hyst, sens = DRIFT_FORMS[form]
     tau1, tau2, width, factor = grid
     vals = list(values)
-    a1 = max(vals.pop(0), 1e-9) if elements >= 1 else 0.0
-    a2 = max(vals.pop(0), 1e-9) if elements >= 2 else 0.0
-    beta = max(vals.pop(0), 1e-9) if hyst else 0.0
+    if sens:  # (c, beta): the sensitivity element on the first time constant
+        c = _kept(vals.pop(0))
+        beta = _kept(float(np.clip(vals.pop(0), *HYSTERESIS_BOUNDS))) if hyst else 0.0
+        return Drift(
+            hysteresis_fraction=beta, hysteresis_width_n=width, sensitivity_per_n=c, sensitivity_tau_s=tau1,
+            sensitivity_recovery_tau_s=tau1 * factor if factor != 1.0 else None,
+        )  # fmt: skip
+    lo, hi = CREEP_FRACTION_BOUNDS
+    a1 = _kept(float(np.clip(vals.pop(0), lo, hi))) if elements >= 1 else 0.0
+    a2 = _kept(float(np.clip(vals.pop(0), lo, hi))) if elements >= 2 else 0.0
+    beta = _kept(float(np.clip(vals.pop(0), *HYSTERESIS_BOUNDS))) if hyst else 0.0
     rec1 = tau1 * factor if elements >= 1 and factor != 1.0 else None
     rec2 = tau2 * factor if elements >= 2 and factor != 1.0 else None
-    return Drift(min(a1, 5.0), tau1, min(a2, 5.0), tau2, min(beta, 0.9), width, rec1, rec2)
+    return Drift(a1, tau1, a2, tau2, beta, width, rec1, rec2)
+
+
+def _kept(value: float) -> float:
+    """A form's own term stays on: a fitted zero would make it another form."""
+    return value if value != 0.0 else 1e-9
 
 
 def _columns(reg: _Regressors, form: str, grid: GridPoint) -> list[FloatArray]:
-    elements, hyst = DRIFT_FORMS[form]
+    """The regressors of a form's linear fractions: in force for the additive forms (K1, K2,
+    F s), in ln(x / F) for the sensitivity forms (K, s)."""
+    elements, hyst, sens = DRIFT_FORMS[form]
     tau1, tau2, width, factor = grid
     cols: list[FloatArray] = []
+    if sens:
+        cols.append(reg.kelvin(tau1, tau1 * factor))
+        if hyst:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                cols.append(reg.hysteresis(width) / reg.force)
+        return cols
     if elements >= 1:
         cols.append(reg.kelvin(tau1, tau1 * factor))
     if elements >= 2:
@@ -278,37 +310,55 @@ def _columns(reg: _Regressors, form: str, grid: GridPoint) -> list[FloatArray]:
 def _fractions(
     reg: _Regressors, form: str, grid: GridPoint, x_hat: FloatArray, rows: BoolArray
 ) -> tuple[Drift, float]:
-    """The non-negative least-squares fractions (a1, a2, beta) at one grid point, and the
-    training residual RMS (N) of x_hat - x(F)."""
+    """The bounded linear least-squares fractions at one grid point (a1, a2, beta in force; c,
+    beta in ln(x / F) for a sensitivity form), and the training residual RMS (N) of
+    x_hat - x(F)."""
+    elements, hyst, sens = DRIFT_FORMS[form]
     cols = _columns(reg, form, grid)
-    y = (x_hat - reg.force)[rows]
-    ok = np.isfinite(y)
+    if sens:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            y = np.log(x_hat / reg.force)[rows]
+        c_low, c_high = SENSITIVITY_BOUNDS_FS[0] / reg.full_scale, SENSITIVITY_BOUNDS_FS[1] / reg.full_scale
+        low = [c_low] + [HYSTERESIS_BOUNDS[0]] * hyst
+        high = [c_high] + [HYSTERESIS_BOUNDS[1]] * hyst
+    else:
+        y = (x_hat - reg.force)[rows]
+        low = [CREEP_FRACTION_BOUNDS[0]] * elements + [HYSTERESIS_BOUNDS[0]] * hyst
+        high = [CREEP_FRACTION_BOUNDS[1]] * elements + [HYSTERESIS_BOUNDS[1]] * hyst
     values = [0.0] * len(cols)
-    if cols and ok.sum() > len(cols):
-        a = np.column_stack([c[rows][ok] for c in cols])
-        ok_cols = np.all(np.isfinite(a), axis=0)
-        if ok_cols.all():
-            values = [float(v) for v in nnls(a, y[ok])[0]]
+    if cols:
+        a = np.column_stack([c[rows] for c in cols])
+        ok = np.isfinite(y) & np.all(np.isfinite(a), axis=1)
+        if ok.sum() > len(cols):
+            values = [float(v) for v in lsq_linear(a[ok], y[ok], bounds=(low, high)).x]
     drift = _drift_at(form, grid, values)
-    resid = y - _design(reg, drift)[rows]
+    resid = (x_hat - reg.force - _design(reg, drift))[rows]
     return drift, rms(resid)
 
 
 def _grid_point(d: Drift) -> GridPoint:
+    if d.sensitivity_per_n:
+        factor = d.recovery_sensitivity_tau_s / d.sensitivity_tau_s
+        return (d.sensitivity_tau_s, d.creep2_tau_s, d.hysteresis_width_n, factor)
     factor = d.recovery_tau1_s / d.creep_tau_s if d.creep_fraction else d.recovery_tau2_s / d.creep2_tau_s
     return (d.creep_tau_s, d.creep2_tau_s, d.hysteresis_width_n, factor)
 
 
 def _design(reg: _Regressors, d: Drift) -> FloatArray:
-    """x(F) - F: the drift terms the reference force drives."""
+    """x(F) - F: what the drift adds to the reading, driven by the reference force
+    (x = F (1 + beta s) exp(c K) + a1 K1 + a2 K2, ``gateway.model.drift``)."""
     out = np.zeros_like(reg.force)
     if d.creep_fraction:
         out = out + d.creep_fraction * reg.kelvin(d.creep_tau_s, d.recovery_tau1_s)
     if d.creep2_fraction:
         out = out + d.creep2_fraction * reg.kelvin(d.creep2_tau_s, d.recovery_tau2_s)
+    scaled = reg.force
     if d.hysteresis_fraction:
-        out = out + d.hysteresis_fraction * reg.hysteresis(d.hysteresis_width_n)
-    return out
+        scaled = scaled + d.hysteresis_fraction * reg.hysteresis(d.hysteresis_width_n)
+    if d.sensitivity_per_n:
+        k = reg.kelvin(d.sensitivity_tau_s, d.recovery_sensitivity_tau_s)
+        scaled = scaled * np.exp(d.sensitivity_per_n * k)
+    return out + scaled - reg.force
 
 
 def fit_candidate(reg: _Regressors, kind: str, form: str, nested: CurveChannel | None = None) -> CurveChannel:
@@ -372,12 +422,12 @@ def _refine(
 ) -> tuple[StaticCurve, Drift]:
     """Step 4 (module docstring): a power law's or a line's two parameters and the fractions
     by one least-squares problem in force on the training rows, started from ``curve`` and
-    ``drift`` (fractions >= 0); a symmetric element's time constant is refined too (in ln tau,
+    ``drift`` (fractions within their bounds); a symmetric element's time constant is refined too (in ln tau,
     within what the record resolves). Both unchanged for a lookup or if it fails."""
-    elements, hyst = DRIFT_FORMS[form]
+    elements, hyst, sens = DRIFT_FORMS[form]
     d = drift
     r = reg.data.resistance_ohm
-    if not isinstance(curve, PowerLawCurve | LineCurve):
+    if sens or not isinstance(curve, PowerLawCurve | LineCurve):
         return curve, drift
     hyst_col = reg.hysteresis(d.hysteresis_width_n) if hyst else None
     ok = rows & np.isfinite(r) & (r > 0)
@@ -403,8 +453,8 @@ def _refine(
     fractions = [d.creep_fraction, d.creep2_fraction][:elements]
     lo_tau, hi_tau = math.log(max(reg.tau_low_s, 1e-3)), math.log(max(reg.tau_high_s, 2e-3))
     p0 += fractions + [math.log(taus[i]) for i in free] + [d.hysteresis_fraction] * hyst
-    low += [0.0] * elements + [lo_tau] * len(free) + [0.0] * hyst
-    high += [5.0] * elements + [hi_tau] * len(free) + [0.9] * hyst
+    low += [CREEP_FRACTION_BOUNDS[0]] * elements + [lo_tau] * len(free) + [HYSTERESIS_BOUNDS[0]] * hyst
+    high += [CREEP_FRACTION_BOUNDS[1]] * elements + [hi_tau] * len(free) + [HYSTERESIS_BOUNDS[1]] * hyst
     lg = np.log(g)
     fixed_cols = {i: reg.kelvin(taus[i], recs[i])[ok] for i in range(elements) if i not in free}
 
@@ -450,9 +500,9 @@ def _refine(
         a[0], a[1], tau1, tau2, rec1, rec2 = a[1], a[0], tau2, tau1, rec2, rec1
     beta = p[-1] if hyst else 0.0
     # a form's own terms stay on (a fitted zero would make it another form)
-    a1 = max(a[0], 1e-9) if elements >= 1 else 0.0
-    a2 = max(a[1], 1e-9) if elements >= 2 else 0.0
-    beta = max(beta, 1e-9) if hyst else 0.0
+    a1 = _kept(a[0]) if elements >= 1 else 0.0
+    a2 = _kept(a[1]) if elements >= 2 else 0.0
+    beta = _kept(beta) if hyst else 0.0
     out = Drift(
         a1, tau1, a2, tau2, beta, d.hysteresis_width_n,
         rec1 if elements >= 1 and rec1 != tau1 else None,
@@ -508,7 +558,7 @@ def rank_candidates(
     reg = _Regressors(data)
     chosen = list(forms) if forms is not None else list(DRIFT_FORMS)
     if not real_time:
-        chosen = [f for f in chosen if DRIFT_FORMS[f][0] == 0]
+        chosen = [f for f in chosen if not DRIFT_FORMS[f].time_driven]
     out: list[Candidate] = []
     fitted: dict[tuple[str, str], CurveChannel] = {}
     holds = find_holds(data.time_s, data.force_n, hold_tolerance_n(data.force_n))  # once, for all

@@ -74,8 +74,9 @@ from .common import parse_assignments
     "update_path",
     type=click.Path(dir_okay=False, path_type=Path),
     metavar="CAL.toml",
-    help="re-fit only the sensitivity (gain and offset) of CAL's [curve] tables from RECORD.csv or from "
-    "--known loads, keeping each curve's shape and dynamics; writes CAL (or --out)",
+    help="re-fit only the sensitivity of CAL's channels (curve, line, lookup: gain and offset; physical "
+    "model: gain) from RECORD.csv or from --known loads, keeping each shape and its dynamics; with "
+    "--first-s, the rest of RECORD.csv is the transfer test; writes CAL (or --out)",
 )
 @click.option(
     "--known",
@@ -134,7 +135,7 @@ def calibrate_cmd(
     ``--out`` replaces an earlier calibration file, but never another kind of file (a gateway
     configuration, say) unless ``--force``.
 
-    ``--update CAL.toml`` re-fits the sensitivity of a stored curve calibration from a short
+    ``--update CAL.toml`` re-fits the sensitivity of a stored calibration (any kind) from a short
     RECORD.csv (the first minutes of a new run) or from ``--known`` loads.
 
     ``--install CONFIG.toml [--device NAME]`` names the calibration in the device's configuration,
@@ -257,7 +258,7 @@ def update_calibration(
     """``calibrate --update``: the sensitivity of CAL's curves from a record or known loads."""
     from ..analysis.update import (
         UpdateError,
-        load_curves,
+        load_channels,
         update_from_loads,
         update_from_record,
         write_updated,
@@ -268,7 +269,7 @@ def update_calibration(
             "--update needs either RECORD.csv or --known FORCE_N=RESISTANCE_OHM loads (one of them)"
         )
     try:
-        curves = load_curves(cal_path)
+        curves = load_channels(cal_path)
         updates = []
         if known:
             loads = list(parse_assignments(known, "--known").items())
@@ -282,7 +283,7 @@ def update_calibration(
             if len(names) != 1 or names[0] not in curves:
                 raise click.UsageError(
                     "--known loads belong to one channel: name it with --channel "
-                    f"(curves: {', '.join(curves)})"
+                    f"(calibrated channels: {', '.join(curves)})"
                 )
             updates.append(update_from_loads(names[0], curves[names[0]], pairs))
         else:
@@ -293,8 +294,8 @@ def update_calibration(
                 cal_name = as_name if as_name and len(chosen) == 1 else rec_name
                 if cal_name not in curves:
                     raise click.UsageError(
-                        f'{cal_path} has no [curve."{cal_name}"] table for record channel {rec_name!r} '
-                        f"(curves: {', '.join(curves)}; map one with --as NAME)"
+                        f"{cal_path} has no table of channel {cal_name!r} for record channel {rec_name!r} "
+                        f"(calibrated channels: {', '.join(curves)}; map one with --as NAME)"
                     )
                 updates.append(
                     update_from_record(cal_name, curves[cal_name], record.channel(rec_name), first_s)

@@ -34,6 +34,7 @@ from .calibration_format import (
     ConversionTable,
     read_calibration,
     read_toml,
+    replace_table,
     set_table_values,
 )
 from .device import _parse_param_overrides, parse_device
@@ -53,6 +54,7 @@ __all__ = [
     "calibration_effects",
     "check_calibration_file",
     "load_calibration",
+    "replace_table",
     "set_table_values",
 ]
 

@@ -41,6 +41,7 @@ __all__ = [
     "ConversionTable",
     "read_calibration",
     "read_toml",
+    "replace_table",
     "set_table_values",
 ]
 
@@ -372,4 +373,21 @@ def set_table_values(text: str, kind: str, updates: Mapping[str, Mapping[str, fl
         table = doc[kind][name]
         for key, value in values.items():
             table[key] = float(value)
+    return tomlkit.dumps(doc)
+
+
+def replace_table(text: str, kind: str, name: str, new_kind: str, values: Mapping[str, object]) -> str:
+    """The calibration file ``text`` with its ``[<kind>.<name>]`` table replaced by a
+    ``[<new_kind>.<name>]`` table of ``values`` (an empty ``[<kind>]`` removed), every other
+    line, comment and table as it was (tomlkit). ``KeyError`` for a table the file lacks."""
+    doc = tomlkit.parse(text)
+    del doc[kind][name]
+    if not doc[kind]:
+        del doc[kind]
+    if new_kind not in doc:
+        doc[new_kind] = tomlkit.table(is_super_table=True)
+    table = tomlkit.table()
+    for key, value in values.items():
+        table[key] = value
+    doc[new_kind][name] = table
     return tomlkit.dumps(doc)

@@ -4,33 +4,42 @@ mechanism): its parameters, their allowed ranges and table, and its response to 
 
 The apparent force x (N) a static curve reads moves away from the applied force F:
 
-  x_k = F_k (1 + beta s_k) + z1_k + z2_k,
+  x_k = F_k (1 + beta s_k) exp(u_k) + z1_k + z2_k,
 
 * z_i, a Kelvin element of the creep chain (the paper's eq. 14-15 in state form): over an
   interval dt with the previous force F_{k-1} held, z_i <- T + (z_i - T) e, T = a_i F_{k-1},
-  e = exp(-dt / tau). Under a held load z_i rises to a_i F with the *loading* time constant
-  ``creep_tau_s`` (the reading creeps up); when T lies below z_i (after unloading) it decays
-  with the *recovery* time constant ``creep_recovery_tau_s`` (default: the loading one). A real
+  e = exp(-dt / tau). While the held force lies above the element's own unit response z_i / a_i
+  (loading) z_i moves towards a_i F with the *loading* time constant ``creep_tau_s``; below it
+  (after unloading) with the *recovery* time constant ``creep_recovery_tau_s`` (default: the
+  loading one). A real
   FSR recovers more slowly than it creeps: a low load right after a high one reads high for
   longer than the creep's own time constant says. One element (``creep``) or two
-  (``creep2``, a slower one). The fractions a_i are >= 0 in every fit (a reading that creeps
-  *down* under load is not what a piezoresistive composite does); older files with a
-  negative fraction still load.
+  (``creep2``, a slower one). A fraction may be negative: some FSRs' conductance *falls* under
+  a held high load and rises again at a low one (the real records of docs/calibration.md); the
+  settled reading (1 + a1 + a2) F must still rise with F, which every fit keeps.
+* u, the *sensitivity* element: the log of the sensor's sensitivity relaxes towards c F_{k-1}
+  (``sensitivity_per_n`` c, 1/N) with its own loading and recovery time constants
+  (``sensitivity_tau_s``, ``sensitivity_recovery_tau_s``), u <- T + (u - T) e, T = c F_{k-1}.
+  Where z_i adds a force that scales with the load (the same newtons at any later load until
+  it has recovered), u scales the reading: an FSR whose conductance falls by 40 % under a held
+  25 N (c < 0) reads a following 3.3 N hold 40 % low at first, about 1.3 N, not 10 N, and
+  recovers towards it as the polymer relaxes back (the real records, docs/calibration.md);
 * s, hysteresis (Preisach-style): play operators of widths c_j w (N, c_j in ``PLAY_SHARES``) on
   the apparent force, p_j <- clip(p_j, x - c_j w, x + c_j w), s = mean_j (p_j - x) / (c_j w)
   in [-1, 1]: -1 while loading, +1 while unloading. The play follows the reading x, not the
   estimated force (a play on the estimate feeds back and flips between branches on noise).
 
-The state at the first sample is the *equilibrium at the first load*: z_i = a_i F_0 and every
-play at x_0 (s = 0), so F_0 = x_0 / (1 + a1 + a2). A sensor at rest (x_0 = 0) starts relaxed,
-as before; a sensor already loaded when the record or the gateway starts is not read as if
-its load had just been applied.
+The state at the first sample is the *equilibrium at the first load*: z_i = a_i F_0,
+u = c F_0 and every play at x_0 (s = 0), so x_0 = F_0 (exp(c F_0) + a1 + a2), solved for F_0.
+A sensor at rest (x_0 = 0) starts relaxed, as before; a sensor already loaded when the record
+or the gateway starts is not read as if its load had just been applied.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +52,7 @@ __all__ = [
     "DRIFT_KEYS",
     "PLAY_SHARES",
     "Drift",
+    "FormParts",
     "kelvin_unit_series",
     "play_direction_series",
 ]
@@ -51,14 +61,30 @@ FloatArray = NDArray[np.float64]
 
 #: The hysteresis plays' widths as shares of ``Drift.hysteresis_width_n``.
 PLAY_SHARES = (0.25, 0.5, 1.0, 2.0)
-#: The dynamics a curve can carry, by name: (creep elements, hysteresis).
-DRIFT_FORMS: dict[str, tuple[int, bool]] = {
-    "static": (0, False),
-    "creep": (1, False),
-    "creep2": (2, False),
-    "hysteresis": (0, True),
-    "creep+hysteresis": (1, True),
-    "creep2+hysteresis": (2, True),
+
+
+class FormParts(NamedTuple):
+    """What a drift form has: additive creep elements, hysteresis, the sensitivity element."""
+
+    elements: int
+    hysteresis: bool
+    sensitivity: bool = False
+
+    @property
+    def time_driven(self) -> bool:
+        return self.elements > 0 or self.sensitivity
+
+
+#: The dynamics a curve can carry, by name.
+DRIFT_FORMS: dict[str, FormParts] = {
+    "static": FormParts(0, False),
+    "creep": FormParts(1, False),
+    "creep2": FormParts(2, False),
+    "hysteresis": FormParts(0, True),
+    "creep+hysteresis": FormParts(1, True),
+    "creep2+hysteresis": FormParts(2, True),
+    "sensitivity": FormParts(0, False, True),
+    "sensitivity+hysteresis": FormParts(0, True, True),
 }
 #: What a file may hold for a fraction (older files: negative ones load; fits write >= 0).
 _FRACTION_RANGE = {
@@ -86,15 +112,21 @@ class Drift:
     hysteresis_width_n: float = 1.0
     creep_recovery_tau_s: float | None = None
     creep2_recovery_tau_s: float | None = None
+    sensitivity_per_n: float = 0.0
+    sensitivity_tau_s: float = 10.0
+    sensitivity_recovery_tau_s: float | None = None
 
     def __post_init__(self) -> None:
         for name, (lo, hi) in _FRACTION_RANGE.items():
             v = finite_value(name, getattr(self, name), "")
             if not lo <= v <= hi:
                 raise CurveError(name, f"{v!r} is out of range; allowed: [{lo}, {hi}]")
-        for name in ("creep_tau_s", "creep2_tau_s"):
+        for name in ("creep_tau_s", "creep2_tau_s", "sensitivity_tau_s"):
             positive_value(name, getattr(self, name), "s")
-        for name in ("creep_recovery_tau_s", "creep2_recovery_tau_s"):
+        c = finite_value("sensitivity_per_n", self.sensitivity_per_n, "1/N")
+        if not -1.0 <= c <= 1.0:
+            raise CurveError("sensitivity_per_n", f"{c!r} is out of range; allowed: [-1, 1] 1/N")
+        for name in ("creep_recovery_tau_s", "creep2_recovery_tau_s", "sensitivity_recovery_tau_s"):
             if getattr(self, name) is not None:
                 positive_value(name, getattr(self, name), "s")
         positive_value("hysteresis_width_n", self.hysteresis_width_n, "N")
@@ -108,6 +140,12 @@ class Drift:
         return self.creep2_tau_s if self.creep2_recovery_tau_s is None else self.creep2_recovery_tau_s
 
     @property
+    def recovery_sensitivity_tau_s(self) -> float:
+        if self.sensitivity_recovery_tau_s is None:
+            return self.sensitivity_tau_s
+        return self.sensitivity_recovery_tau_s
+
+    @property
     def elements(self) -> tuple[tuple[float, float, float], ...]:
         """The active Kelvin elements: (fraction, loading tau s, recovery tau s)."""
         out = []
@@ -118,10 +156,19 @@ class Drift:
         return tuple(out)
 
     @property
-    def form(self) -> str:
+    def parts(self) -> FormParts:
         elements = 2 if self.creep2_fraction != 0.0 else 1 if self.creep_fraction != 0.0 else 0
-        hyst = self.hysteresis_fraction != 0.0
-        return next(k for k, v in DRIFT_FORMS.items() if v == (elements, hyst))
+        return FormParts(elements, self.hysteresis_fraction != 0.0, self.sensitivity_per_n != 0.0)
+
+    @property
+    def form(self) -> str:
+        """The form's name; a combination no fit writes (creep with sensitivity) reads as both."""
+        parts = self.parts
+        found = [k for k, v in DRIFT_FORMS.items() if v == parts]
+        if found:
+            return found[0]
+        base = next(k for k, v in DRIFT_FORMS.items() if v == FormParts(parts.elements, parts.hysteresis))
+        return f"{base}+sensitivity"
 
     @property
     def active(self) -> bool:
@@ -134,8 +181,11 @@ class Drift:
 
     @property
     def n_parameters(self) -> int:
-        elements, hyst = DRIFT_FORMS[self.form]
-        return 2 * elements + 2 * int(hyst) + sum(1 for _, load, rec in self.elements if load != rec)
+        elements, hyst, sens = self.parts
+        asym = sum(1 for _, load, rec in self.elements if load != rec)
+        if sens:
+            asym += 1 + int(self.sensitivity_tau_s != self.recovery_sensitivity_tau_s)
+        return 2 * elements + 2 * int(hyst) + asym + int(sens)
 
     def table(self) -> dict[str, float]:
         """The keys a calibration table holds (a recovery time constant only when it is set)."""
@@ -190,7 +240,18 @@ def play_direction_series(reading_n: FloatArray, width_n: float, start_n: float 
 
 
 def equilibrium_force_n(apparent_n: float, drift: Drift) -> float:
-    """F_0 = x_0 / (1 + sum a_i) (N, at least 0): the force a reading x_0 means for a sensor
-    that has held that load long enough for every Kelvin element to settle."""
-    total = 1.0 + sum(a for a, _, _ in drift.elements)
-    return max(apparent_n / total, 0.0) if total > 0.0 and math.isfinite(apparent_n) else 0.0
+    """F_0 (N, at least 0) with x_0 = F_0 (exp(c F_0) + a1 + a2): the force a reading x_0
+    means for a sensor that has held that load long enough for every element to settle
+    (a few Newton steps where the sensitivity element is on; x_0 / (1 + a1 + a2) without it)."""
+    if not math.isfinite(apparent_n) or apparent_n <= 0.0:
+        return 0.0
+    a = sum(f for f, _, _ in drift.elements)
+    c = drift.sensitivity_per_n
+    f = apparent_n / (1.0 + a) if 1.0 + a > 0.0 else 0.0
+    for _ in range(50 if c else 0):
+        e = math.exp(c * f)
+        step = (f * (e + a) - apparent_n) / (e * (1.0 + c * f) + a)
+        f = max(f - step, 0.0)
+        if abs(step) <= 1e-14 * max(f, 1e-300):
+            break
+    return f

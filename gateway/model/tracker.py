@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,35 +43,33 @@ _DUMMY: tuple[tuple[float, ...], tuple[float, ...]] = ((1.0, 2.0), (1.0, 0.0))
 @dataclass(frozen=True)
 class CurveState:
     """Per-channel state of curve channels (arrays over the device's curve channels): the
-    Kelvin elements z1, z2 (N), the plays (N), the held force (N) and whether the channel has
-    had its first valid sample (before it, the next valid sample sets the equilibrium)."""
+    Kelvin elements z1, z2 (N), the plays (N), the held force (N), whether the channel has
+    had its first valid sample (before it, the next valid sample sets the equilibrium) and the
+    sensitivity element's log gain u."""
 
     z1: FloatArray
     z2: FloatArray
     play_n: FloatArray  # (channels, len(PLAY_SHARES))
     last_force_n: FloatArray
     started: BoolArray
+    #: the log of each channel's sensitivity (``drift``'s sensitivity element; 0 at rest)
+    log_gain: FloatArray
 
     @classmethod
     def zeros(cls, n: int) -> CurveState:
-        return cls(
-            np.zeros(n),
-            np.zeros(n),
-            np.zeros((n, len(PLAY_SHARES))),
-            np.zeros(n),
-            np.zeros(n, dtype=np.bool_),
-        )
+        zero = np.zeros(n)
+        return cls(zero, zero, np.zeros((n, len(PLAY_SHARES))), zero, np.zeros(n, dtype=np.bool_), zero)
 
     @classmethod
     def rested(cls, n: int) -> CurveState:
         """The state of channels known to have been unloaded long enough to settle."""
-        zero = cls.zeros(n)
-        return CurveState(zero.z1, zero.z2, zero.play_n, zero.last_force_n, np.ones(n, dtype=np.bool_))
+        return replace(cls.zeros(n), started=np.ones(n, dtype=np.bool_))
 
     def select(self, idx: NDArray[np.intp]) -> CurveState:
         return CurveState(
-            self.z1[idx], self.z2[idx], self.play_n[idx], self.last_force_n[idx], self.started[idx]
-        )
+            self.z1[idx], self.z2[idx], self.play_n[idx], self.last_force_n[idx], self.started[idx],
+            self.log_gain[idx],
+        )  # fmt: skip
 
 
 class CurveSet:
@@ -111,6 +109,12 @@ class CurveSet:
         self.a2 = np.array([x.creep2_fraction for x in d])
         self.tau2 = np.array([x.creep2_tau_s for x in d])
         self.rec2 = np.array([x.recovery_tau2_s for x in d])
+        self.sign1, self.sign2 = np.sign(self.a1), np.sign(self.a2)
+        self.cs = np.array([x.sensitivity_per_n for x in d])
+        self.taus = np.array([x.sensitivity_tau_s for x in d])
+        self.recs = np.array([x.recovery_sensitivity_tau_s for x in d])
+        self.signs = np.sign(self.cs)
+        self.sensitive = bool(np.any(self.cs != 0.0))
         self.beta = np.array([x.hysteresis_fraction for x in d])
         self.width = np.array([x.hysteresis_width_n for x in d])
         #: each channel's plays' widths (channels, len(PLAY_SHARES)), N
@@ -162,25 +166,34 @@ class CurveSet:
         if self.dynamic:
             fresh = valid & ~started
             z1, z2, play, held = state.z1, state.z2, state.play_n, np.maximum(state.last_force_n, 0.0)
+            u = state.log_gain
             if fresh.any():  # the equilibrium at the first load (``drift``)
-                f0 = np.maximum(np.where(fresh, x, 0.0) / (1.0 + self.a1 + self.a2), 0.0)
+                f0 = np.array(
+                    [equilibrium_force_n(v, c.drift) if m else 0.0
+                     for v, c, m in zip(x.tolist(), self.channels, fresh.tolist(), strict=True)]
+                )  # fmt: skip
                 z1 = np.where(fresh, self.a1 * f0, z1)
                 z2 = np.where(fresh, self.a2 * f0, z2)
+                u = np.where(fresh, self.cs * f0, u)
                 play = np.where(fresh[:, None], np.where(fresh, x, 0.0)[:, None], play)
                 held = np.where(fresh, f0, held)
             dt = max(float(dt_s), 0.0) if math.isfinite(dt_s) else 0.0
             t1, t2 = self.a1 * held, self.a2 * held
-            e1 = np.exp(-dt / np.where(t1 > z1, self.tau1, self.rec1))
-            e2 = np.exp(-dt / np.where(t2 > z2, self.tau2, self.rec2))
+            # loading: the held force above the element's own unit response z / a
+            e1 = np.exp(-dt / np.where((t1 - z1) * self.sign1 > 0.0, self.tau1, self.rec1))
+            e2 = np.exp(-dt / np.where((t2 - z2) * self.sign2 > 0.0, self.tau2, self.rec2))
             z1 = t1 + (z1 - t1) * e1
             z2 = t2 + (z2 - t2) * e2
+            if self.sensitive:
+                tu = self.cs * held
+                u = tu + (u - tu) * np.exp(-dt / np.where((tu - u) * self.signs > 0.0, self.taus, self.recs))
             widths = self.play_widths
             xs = x[:, None]
             play = np.where(valid[:, None], np.clip(play, xs - widths, xs + widths), play)
             s = np.mean((play - xs) / widths, axis=1)
-            f = (x - z1 - z2) / (1.0 + self.beta * s)
+            f = (x - z1 - z2) / ((1.0 + self.beta * s) * np.exp(u))
         else:
-            z1, z2, play, f = state.z1, state.z2, state.play_n, x
+            z1, z2, play, f, u = state.z1, state.z2, state.play_n, x, state.log_gain
         invalid = np.isnan(f)
         no_contact = ~invalid & (f <= self.floor)
         status = np.where(invalid, _INVALID, np.where(no_contact, _NO_CONTACT, _OK)).astype(np.int8)
@@ -188,7 +201,7 @@ class CurveSet:
         with np.errstate(invalid="ignore"):
             extrapolated = ~invalid & ~no_contact & ((force < self.low) | (force > self.high))
         new_held = np.where(invalid, state.last_force_n, force)
-        return force, status, x, extrapolated, CurveState(z1, z2, play, new_held, started | valid)
+        return force, status, x, extrapolated, CurveState(z1, z2, play, new_held, started | valid, u)
 
 
 def track_series(
@@ -211,25 +224,29 @@ def track_series(
     a1, a2, beta = d.creep_fraction, d.creep2_fraction, d.hysteresis_fraction
     e1u, e1d = np.exp(-dt / d.creep_tau_s).tolist(), np.exp(-dt / d.recovery_tau1_s).tolist()
     e2u, e2d = np.exp(-dt / d.creep2_tau_s).tolist(), np.exp(-dt / d.recovery_tau2_s).tolist()
+    c = d.sensitivity_per_n
+    esu = np.exp(-dt / d.sensitivity_tau_s).tolist()
+    esd = np.exp(-dt / d.recovery_sensitivity_tau_s).tolist()
     s = (
         play_direction_series(x, d.hysteresis_width_n, 0.0 if from_rest else None).tolist()
         if beta
         else [0.0] * x.size
     )
     out = [0.0] * x.size
-    z1 = z2 = held = 0.0
+    z1 = z2 = held = u = 0.0
     started = from_rest
     for k, xk in enumerate(x.tolist()):
         if not started and xk == xk:
             held = equilibrium_force_n(xk, d)
-            z1, z2, started = a1 * held, a2 * held, True
-        t1, t2 = a1 * held, a2 * held
-        z1 = t1 + (z1 - t1) * (e1u[k] if t1 > z1 else e1d[k])
-        z2 = t2 + (z2 - t2) * (e2u[k] if t2 > z2 else e2d[k])
+            z1, z2, u, started = a1 * held, a2 * held, c * held, True
+        t1, t2, tu = a1 * held, a2 * held, c * held
+        z1 = t1 + (z1 - t1) * (e1u[k] if (t1 - z1) * a1 > 0.0 else e1d[k])
+        z2 = t2 + (z2 - t2) * (e2u[k] if (t2 - z2) * a2 > 0.0 else e2d[k])
+        u = tu + (u - tu) * (esu[k] if (tu - u) * c > 0.0 else esd[k])
         if xk != xk:  # NaN: invalid, the held force stays
             out[k] = xk
             continue
-        f = (xk - z1 - z2) / (1.0 + beta * s[k])
+        f = (xk - z1 - z2) / ((1.0 + beta * s[k]) * math.exp(u))
         if f <= floor:
             f = 0.0
         out[k] = f

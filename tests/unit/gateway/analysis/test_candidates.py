@@ -11,15 +11,28 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gateway.analysis.candidates import (
-    fit_curve,
-    hold_drift_pct,
-    kelvin_response,
-    rank_candidates,
-)
+from gateway.analysis.candidates import fit_curve, rank_candidates
 from gateway.analysis.fitting import FitData
-from gateway.analysis.holds import MIN_HOLD_S, Hold, find_holds, hold_tolerance_n
-from gateway.model.curves import DRIFT_FORMS, LineCurve, LookupCurve, PowerLawCurve, preisach_direction
+from gateway.analysis.holds import (
+    MIN_HOLD_S,
+    Hold,
+    drift_groups_pct,
+    find_holds,
+    hold_drifts,
+    hold_tolerance_n,
+)
+from gateway.model.curves import DRIFT_FORMS, LineCurve, LookupCurve, PowerLawCurve
+from gateway.model.drift import kelvin_unit_series, play_direction_series
+
+
+def kelvin_response(held: np.ndarray, dt: np.ndarray, tau: float) -> np.ndarray:
+    """A symmetric unit Kelvin element from rest (``drift.kelvin_unit_series``)."""
+    return kelvin_unit_series(held, dt, tau, tau, 0.0)
+
+
+def preisach_direction(x: np.ndarray, width: float) -> np.ndarray:
+    """The plays' direction from plays at 0 N (``drift.play_direction_series``)."""
+    return play_direction_series(x, width, 0.0)
 
 # ---------------------------------------------------------------- Kelvin regressor
 
@@ -163,12 +176,13 @@ HOLD_S, REST_S, DT_S = 30.0, 10.0, 0.2
 
 def creep_record(noise: float = 0.002) -> FitData:
     """A power-law sensor (k = 1e-4 S/N^0.8) with one Kelvin element (a = 0.15, tau = 10 s):
-    holds of 30 s at the levels above with 10 s unloaded between, sampled every 0.2 s.
+    10 s unloaded, then a hold of 30 s at each level above, sampled every 0.2 s.
     The sensor reads x = F + z, z <- e z + (1 - e) a F_prev (the curves' convention), and
     R = 1 / (k x^n) times a log-normal noise of 0.2 %; every third cycle is held out."""
     t = np.arange(0.0, len(LEVELS) * (HOLD_S + REST_S), DT_S)
     cycle = (t // (HOLD_S + REST_S)).astype(int)
-    in_hold = (t - cycle * (HOLD_S + REST_S)) < HOLD_S - 1e-9
+    # every cycle rests first: the record starts unloaded, its load history known
+    in_hold = (t - cycle * (HOLD_S + REST_S)) >= REST_S - 1e-9
     force = np.where(in_hold, np.array(LEVELS)[cycle], 0.0)
     x = np.empty_like(force)
     z = 0.0
@@ -256,24 +270,32 @@ def test_rank_candidates_by_kind_and_form() -> None:
 
 
 def test_hold_drift_by_hand() -> None:
-    """Two holds: 2 N for 10 s with an error rising 0.05 N/s, 1 N with a constant error.
+    """Two holds: 2 N for 10 s with an error rising 0.05 N/s, then 1 N with a constant error.
     101 rows in the first: 10 per edge, mean error 0.05 x 0.45 = 0.0225 N at the start and
-    0.05 x 9.55 = 0.4775 N at the end: a change of 0.455 N; the second changes 0.
-    RMS over the holds: 0.455 / sqrt 2 = 0.32173 N, of a 4 N full scale: 8.0433 %."""
+    0.05 x 9.55 = 0.4775 N at the end: a change of 0.455 N, of a 4 N full scale 11.375 %; the
+    second, right after a higher load, changes 0."""
     t1 = np.round(np.arange(101) * 0.1, 10)
     t = np.concatenate([t1, 10.0 + np.arange(1, 21) * 0.5, 20.5 + t1])
     ref = np.concatenate([np.full(101, 2.0), np.zeros(20), np.full(101, 1.0)])
     force = ref + np.concatenate([0.05 * t1, np.zeros(20), np.full(101, 0.3)])
     rows = np.ones(t.size, dtype=bool)
-    assert hold_drift_pct(t, ref, force, rows, 4.0) == pytest.approx(100 * 0.455 / math.sqrt(2) / 4, rel=1e-9)
-    # a hold with a row outside ``rows`` is left out; none left: NaN
-    rows[150] = False
-    assert hold_drift_pct(t, ref, force, rows, 4.0) == pytest.approx(100 * 0.455 / 4, rel=1e-9)
-    rows[50] = False
-    assert math.isnan(hold_drift_pct(t, ref, force, rows, 4.0))
-
-
-# ---------------------------------------------------------------- holds
+    drifts = hold_drifts(t, ref, force, rows)
+    assert [d.after_higher for d in drifts] == [False, True]
+    assert drifts[0].change_n == pytest.approx(0.455, rel=1e-9)
+    assert drifts[1].start_error_n == pytest.approx(0.3, rel=1e-12) and drifts[1].change_n == pytest.approx(0.0)
+    groups = drift_groups_pct(drifts, 4.0)
+    assert groups.others_pct_fs == pytest.approx(100 * 0.455 / 4, rel=1e-9)
+    assert groups.after_higher_pct_fs == pytest.approx(0.0, abs=1e-9)
+    assert (groups.after_higher_holds, groups.other_holds) == (1, 1)
+    # a hold measured on part of its rows: its longest run of them, if it lasts MIN_HOLD_S
+    rows[:60] = False  # the first hold keeps rows 60..100: 4 s, 4 rows per edge, 3.7 s apart
+    first = hold_drifts(t, ref, force, rows)[0]
+    assert first.hold.start == 60 and first.change_n == pytest.approx(0.05 * 3.7, rel=1e-9)
+    rows[:80] = False  # 2 s left: no longer a hold to measure
+    assert len(hold_drifts(t, ref, force, rows)) == 1
+    # no hold left: NaN
+    rows[:] = False
+    assert math.isnan(drift_groups_pct(hold_drifts(t, ref, force, rows), 4.0).others_pct_fs)
 
 
 def test_holds_at_levels_with_unloads_between() -> None:

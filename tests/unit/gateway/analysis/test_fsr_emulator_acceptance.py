@@ -19,8 +19,7 @@ import numpy as np
 import pytest
 
 from gateway.analysis.calibration import Calibration, calibrate
-from gateway.analysis.candidates import hold_change_n
-from gateway.analysis.holds import Hold, find_holds, hold_tolerance_n
+from gateway.analysis.holds import find_holds, hold_drifts, hold_tolerance_n
 from gateway.analysis.records import read_record
 from gateway.analysis.update import update_from_record
 from gateway.model.curves import CurveChannel, track_series
@@ -103,13 +102,13 @@ def test_in_holds_where_the_static_curve_drifts_5_percent_the_tracked_force_stay
     holds = find_holds(run.time_s, run.force_n, tolerance)
     assert len(holds) >= 4, "the protocol holds 49, 10, 35 and 20 N for 40 s each"
 
-    def change_pct(force: np.ndarray, h: Hold) -> float:
-        return 100.0 * hold_change_n(run.force_n, force, h, tolerance) / full_scale
-
+    by_tracked = hold_drifts(run.time_s, run.force_n, tracked, None, holds, tolerance)
+    by_static = hold_drifts(run.time_s, run.force_n, static, None, holds, tolerance)
     drifting = 0
-    for h in holds:
-        static_change = change_pct(static, h)
-        tracked_change = change_pct(tracked, h)
+    for t_drift, s_drift in zip(by_tracked, by_static, strict=True):
+        h = t_drift.hold
+        static_change = 100.0 * s_drift.change_n / full_scale
+        tracked_change = 100.0 * t_drift.change_n / full_scale
         if static_change > 5.0:  # where the static curve drifts by more than 5 % FS
             drifting += 1
             assert abs(tracked_change) <= 1.0, (
