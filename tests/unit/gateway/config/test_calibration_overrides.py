@@ -51,7 +51,9 @@ def test_a_calibration_with_hysteresis_reads_its_channel_with_hysteresis(tmp_pat
     assert tip.effects == HYSTERESIS and tip.params == SensorParams(r0_ohm=187500.0, e0_pa=14e6)
     assert other.effects == PAPER_EFFECTS and other.params == SensorParams()  # no table: the device's
     # the runtime's physical model of the tip has hysteresis, the other channels' not
-    groups = {tuple(ks): model.effects for ks, model in DeviceProcessor(dev, bus="b", poll_interval_s=1.0).groups}
+    groups = {
+        tuple(ks): model.effects for ks, model in DeviceProcessor(dev, bus="b", poll_interval_s=1.0).groups
+    }
     assert groups[(0,)] == HYSTERESIS
     assert all(effects == PAPER_EFFECTS for ks, effects in groups.items() if ks != (0,))
 
