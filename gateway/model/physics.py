@@ -98,10 +98,11 @@ def relax_series(log_a: FloatArray, target: FloatArray, x0: FloatArray) -> tuple
 
     In scaled form x[k] = D[k] (x0 + sum_j<=k (1 - a[j]) target[j] / D[j]), D the running
     product of the decays, which a double holds while the decay spans at most
-    ``_BLOCK_LOG_DECAY`` e-folds. One pass whatever the time constant: the rows are cut into
-    equal blocks that span no more than that in any channel, every block is solved from a
-    zero start at once, and the blocks' end states follow from a doubling scan of their maps
-    x -> A x + B (``_compose_affine``), which only multiplies by decays and adds.
+    ``_BLOCK_LOG_DECAY`` e-folds: one pass when the whole series does. Otherwise still one
+    pass, whatever the time constant: the rows are cut into equal blocks that span no more than
+    that in any channel, every block is solved from a zero start at once, and the blocks' end
+    states follow from a doubling scan of their maps x -> A x + B (``_compose_affine``),
+    which only multiplies by decays and adds.
     """
     log_a = np.maximum(log_a, MIN_LOG_DECAY, dtype=np.float64)
     minus_b = np.multiply(target, np.expm1(log_a))  # -(1 - a) target, broadcast to (T, ...)
@@ -109,6 +110,13 @@ def relax_series(log_a: FloatArray, target: FloatArray, x0: FloatArray) -> tuple
     x0 = np.asarray(x0, dtype=np.float64)
     if n_t == 0:
         return minus_b, x0
+    cum = np.cumsum(log_a, axis=0)
+    if n_t <= _BLOCK_ROWS and np.min(cum) >= -_BLOCK_LOG_DECAY and np.max(cum) <= _BLOCK_LOG_DECAY:
+        decay = np.exp(cum, out=cum)  # one block: the whole series
+        x = np.cumsum(np.divide(minus_b, decay, out=minus_b), axis=0, out=minus_b)
+        np.subtract(x0, x, out=x)
+        np.multiply(x, decay, out=x)
+        return x, np.asarray(x[-1])
     low, high = float(np.min(log_a)), float(np.max(log_a))
     peak = max(-low, high)
     if math.isnan(low + high):  # a NaN spoils its own channel only: size the blocks on the rest
@@ -116,15 +124,9 @@ def relax_series(log_a: FloatArray, target: FloatArray, x0: FloatArray) -> tuple
     rows = min(_BLOCK_ROWS, n_t)
     if peak > 0.0:
         rows = max(1, int(min(_BLOCK_LOG_DECAY // peak, rows)))
-    if rows < n_t:
-        rows = -(-n_t // -(-n_t // rows))  # as many blocks, of equal size: the least padding
-        out = _relax_blocks(np.broadcast_to(log_a, minus_b.shape), minus_b, x0, rows)
-        return out, np.asarray(out[-1])
-    decay = np.exp(np.cumsum(log_a, axis=0))
-    x = np.cumsum(np.divide(minus_b, decay, out=minus_b), axis=0, out=minus_b)
-    np.subtract(x0, x, out=x)
-    np.multiply(x, decay, out=x)
-    return x, np.asarray(x[-1])
+    rows = -(-n_t // -(-n_t // rows))  # as many blocks, of equal size: the least padding
+    out = _relax_blocks(np.broadcast_to(log_a, minus_b.shape), minus_b, x0, rows)
+    return out, np.asarray(out[-1])
 
 
 def _relax_blocks(log_a: FloatArray, minus_b: FloatArray, x0: FloatArray, rows: int) -> FloatArray:
