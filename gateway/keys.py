@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Callable, Iterable, Sequence
+from enum import StrEnum
 from typing import Final
 
-__all__ = ["UNKNOWN_KEY", "check_keys", "suggest"]
+__all__ = ["UNKNOWN_KEY", "Choice", "check_keys", "suggest"]
 
 #: The message of an unknown key. Fields: ``{key}`` (the key, quoted), ``{hint}`` ("; did you
 #: mean 'x'?" or nothing) and ``{allowed}`` (the allowed keys, comma separated).
@@ -47,3 +48,19 @@ def check_keys(
             hint = suggest(key, allowed) if isinstance(key, str) else ""
             listed = ", ".join(allowed if shown is None else shown)
             raise error(key, template.format(key=repr(key), hint=hint, allowed=listed))
+
+
+class Choice(StrEnum):
+    """The words one configuration key allows (a bus ``kind``, a device ``encoding``, a
+    register ``table``), as the file spells them: a member equals its string (TOML's), shows
+    as it (``'tcp'`` in a message, not ``<BusKind.TCP: 'tcp'>``), and a word that is none of
+    them is a ``ValueError`` naming the closest and every allowed one, never a default."""
+
+    def __repr__(self) -> str:
+        return repr(self.value)
+
+    @classmethod
+    def _missing_(cls, value: object) -> Choice:
+        words = [m.value for m in cls]
+        hint = suggest(value, words) if isinstance(value, str) else ""
+        raise ValueError(f"{value!r} is not allowed{hint}; allowed: {', '.join(map(repr, words))}")

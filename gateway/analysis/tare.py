@@ -34,7 +34,7 @@ from typing import Any, Final, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config import DeviceConfig
+from ..config import DeviceConfig, Encoding
 from ..errors import GatewayError
 from ..model import DividerStatus, SensorModel
 
@@ -147,7 +147,7 @@ def compute_tare(
             f"only {len(samples)} polls; a tare needs at least {MIN_POLLS} (sample longer); "
             "nothing was written"
         )
-    adc = device.encoding == "adc"
+    adc = device.encoding is Encoding.ADC
     keep = [k for k, s in enumerate(samples) if (s.counts if adc else s.resistance_ohm) is not None]
     if len(keep) < MIN_POLLS:
         raise TareError("the samples carry no values of this device's encoding; nothing was written")

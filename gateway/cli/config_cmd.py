@@ -16,7 +16,7 @@ from typing import Any, NoReturn, TypeVar
 
 import click
 
-from ..config import BusConfig, DeviceConfig, GatewayConfig, parse_config
+from ..config import BusConfig, BusKind, DeviceConfig, Encoding, GatewayConfig, SerialClient, parse_config
 from ..config.device import device_overrides
 from ..config.editor import (
     Assignment,
@@ -128,7 +128,7 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
         )
     for key, value in dev.checks.identification:
         out.append(f"    check at connect: identification {key} = {value!r} (FC 43/14)")
-    if dev.encoding == "adc":
+    if dev.encoding is Encoding.ADC:
         out.append(f"    front end: {dev.front_end.describe()}")
     out.append(
         f"    calibration: {dev.calibration}"
@@ -137,14 +137,14 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
     )
     tared = [ch for ch in dev.channels if ch.baseline_ohm is not None]
     device_zero = any(name == "zero" for name, _ in dev.registers.actions)
-    if dev.encoding == "output":
+    if dev.encoding is Encoding.OUTPUT:
         out.append(
             "    zero: the device's own"
             + (" (`tare --device-zero` runs its zero action)" if device_zero else "")
         )
     elif tared:
         values = [ch.baseline_ohm for ch in tared if ch.baseline_ohm is not None]
-        unit = "R_ref" if dev.encoding == "adc" and isinstance(dev.front_end, RatioFrontEnd) else "ohm"
+        unit = "R_ref" if dev.encoding is Encoding.ADC and isinstance(dev.front_end, RatioFrontEnd) else "ohm"
         out.append(
             f"    zero: {len(tared)} channel(s) with an unloaded baseline, "
             f"{min(values):.4g}..{max(values):.4g} {unit} (read at the baseline: 0 N, no contact)"
@@ -162,8 +162,8 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
 
 
 def _bus_line(bus: BusConfig) -> str:
-    if bus.kind == "rtu":
-        framing = "the gateway's own RTU framing" if bus.serial_client == "direct" else "pymodbus"
+    if bus.kind is BusKind.RTU:
+        framing = "the gateway's own RTU framing" if bus.serial_client is SerialClient.DIRECT else "pymodbus"
         where = f"rtu {bus.serial_port} {bus.baudrate} {bus.bytesize}{bus.parity}{bus.stopbits} ({framing})"
     else:
         where = f"{bus.kind} {bus.endpoint}"

@@ -36,7 +36,8 @@ import click
 
 from ..errors import GatewayError
 from ..modbus.backends import open_transport
-from ..modbus.endpoint import Endpoint, TlsSettings
+from ..modbus.endpoint import BusKind, Endpoint, SerialClient, TlsSettings
+from ..modbus.register_map import RegisterKind
 from ..modbus.scan import analyse
 from ..modbus.scan_read import BISECT_CODES as BISECT_CODES
 from ..modbus.scan_read import ILLEGAL_FUNCTION as ILLEGAL_FUNCTION
@@ -59,7 +60,7 @@ EXIT_UNREACHABLE = 1
 class ScanEndpoint:
     """The bus of a scan, from the command line (a ``gateway.modbus.endpoint.Endpoint``)."""
 
-    kind: str
+    kind: BusKind
     host: str | None = None
     port: int | None = None
     serial_port: str | None = None
@@ -70,7 +71,11 @@ class ScanEndpoint:
     timeout_s: float = 1.0
     name: str = "scan"
     tls: TlsSettings | None = None
-    serial_client: str = "pymodbus"
+    serial_client: SerialClient = SerialClient.PYMODBUS
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", BusKind(self.kind))
+        object.__setattr__(self, "serial_client", SerialClient(self.serial_client))
 
 
 #: Builds the transport of a scan; tests put an in-process bus here.
@@ -112,7 +117,7 @@ def parse_ranges(text: str, what: str) -> list[Range]:
 
 # --------------------------------------------------------------------------- the command
 def _target(bus: ScanEndpoint) -> str:
-    if bus.kind == "rtu":
+    if bus.kind is BusKind.RTU:
         return f"{bus.serial_port} ({bus.baudrate} baud, parity {bus.parity})"
     return f"{bus.host}:{bus.port} ({bus.kind})"
 
@@ -120,7 +125,7 @@ def _target(bus: ScanEndpoint) -> str:
 async def _run(
     bus: ScanEndpoint,
     device_id: int,
-    ranges: Mapping[str, Sequence[Range]],
+    ranges: Mapping[RegisterKind, Sequence[Range]],
     rounds: int,
     interval_s: float,
     view: RoundView | None,
@@ -206,15 +211,17 @@ def scan(
         raise click.UsageError("give --host (Modbus TCP) or --serial (Modbus RTU), one of them")
     if input_text is None and holding_text is None:
         raise click.UsageError("give --input and/or --holding: the register ranges to read")
-    ranges: dict[str, list[Range]] = {}
+    ranges: dict[RegisterKind, list[Range]] = {}
     if input_text is not None:
-        ranges["input"] = parse_ranges(input_text, "--input")
+        ranges[RegisterKind.INPUT] = parse_ranges(input_text, "--input")
     if holding_text is not None:
-        ranges["holding"] = parse_ranges(holding_text, "--holding")
+        ranges[RegisterKind.HOLDING] = parse_ranges(holding_text, "--holding")
     if serial_port is not None:
-        bus = ScanEndpoint("rtu", serial_port=serial_port, baudrate=baud, parity=parity, timeout_s=timeout_s)
+        bus = ScanEndpoint(
+            BusKind.RTU, serial_port=serial_port, baudrate=baud, parity=parity, timeout_s=timeout_s
+        )
     else:
-        bus = ScanEndpoint("tcp", host=host, port=port, timeout_s=timeout_s)
+        bus = ScanEndpoint(BusKind.TCP, host=host, port=port, timeout_s=timeout_s)
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its errors are reported as ours
     out = sys.stdout
     title = f"unit {device_id} on {_target(bus)}"

@@ -34,7 +34,7 @@ import numpy as np
 from prometheus_client import CollectorRegistry
 
 from ..analysis.records import ChannelRecord, Record, read_record
-from ..config import ChannelConfig, DeviceConfig, RegisterMap, load_config
+from ..config import ChannelConfig, DeviceConfig, Encoding, RegisterMap, load_config
 from ..config.layout import GridLayout
 from ..errors import ConfigError, RecordError
 from ..metrics.server import MetricsServer
@@ -111,7 +111,7 @@ def fallback_device(record: Record) -> DeviceConfig:
                       PAPER_EFFECTS, SensorParams(), None, None)
         for k, name in enumerate(names)
     )  # fmt: skip
-    return DeviceConfig("record", 1, "float32", n, RegisterMap(), Divider(), channels, False,
+    return DeviceConfig("record", 1, Encoding.FLOAT32, n, RegisterMap(), Divider(), channels, False,
                         GridLayout(n, columns, pitch_mm, pitch_mm), None)  # fmt: skip
 
 

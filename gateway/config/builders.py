@@ -17,7 +17,7 @@ from ..model import Divider, FrontEnd, SensorParams
 from ..model.effects import PAPER_EFFECTS
 from .device import parse_device
 from .parser import ROOT_KEYS, check_unique_names, parse_bus, parse_metrics
-from .schema import DEFAULT_METRICS_PORT, BusConfig, DeviceConfig, GatewayConfig, TlsConfig
+from .schema import DEFAULT_METRICS_PORT, BusConfig, BusKind, DeviceConfig, GatewayConfig, TlsConfig
 from .tables import Context, Table
 
 __all__ = ["bus_config_for", "device_config_for", "gateway_config_for"]
@@ -118,7 +118,7 @@ def bus_config_for(
         "backoff_initial_s": backoff_initial_s,
         "backoff_max_s": backoff_max_s,
     }
-    if kind == "rtu":
+    if kind == BusKind.RTU:
         table.update(serial_port=serial_port, baudrate=baudrate, parity="N", stopbits=1, bytesize=8)
         table.update(serial_client=serial_client)
     else:

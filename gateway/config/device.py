@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
-from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, MAX_READ_REGISTERS, ValueFrame
+from ..modbus.register_map import FRAME_ENCODINGS, MAX_READ_REGISTERS, Encoding, ValueFrame
 from ..model.conversion import Conversion, ConversionError, conversion_from_table
 from ..model.curves import DRIFT_KEYS, CurveError, Drift
 from ..model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
@@ -199,7 +199,7 @@ def _parse_device(
     frame_table = table.table("frame", FRAME_KEYS, "[bus.device.frame]")
     frame = parse_frame(frame_table, n, MAX_READ_REGISTERS)
     if frame is None:
-        encoding = table.choice("encoding", "adc", ENCODINGS[:2])
+        encoding = table.choice("encoding", Encoding.ADC, (Encoding.ADC, Encoding.FLOAT32))
     else:
         encoding = FRAME_ENCODINGS[frame.quantity]
         if table.has("encoding") and data["encoding"] != encoding:
@@ -228,7 +228,7 @@ def _parse_device(
         front_end = parse_front_end(
             ctx, table.at("front_end"), table.raw_table("front_end", "[bus.device.front_end]")
         )
-    elif table.has("divider") or encoding != "adc":
+    elif table.has("divider") or encoding is not Encoding.ADC:
         front_end = parse_divider(table.table("divider", DIVIDER_KEYS, "[bus.device.divider]"))
     else:
         raise table.error(
@@ -237,7 +237,7 @@ def _parse_device(
             '(kind = "high_side" | "low_side" | "transimpedance", docs/front-ends.md), '
             "or a profile that names it",
         )
-    baselines = parse_baselines(table, n, front_end if encoding == "adc" else None)
+    baselines = parse_baselines(table, n, front_end if encoding is Encoding.ADC else None)
 
     model = table.table("model", _MODEL_KEYS, "[bus.device.model]")
     device_effects = (

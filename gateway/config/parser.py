@@ -37,6 +37,7 @@ from .schema import (
     STOPBITS,
     TIMEOUT_S,
     BusConfig,
+    BusKind,
     DeviceConfig,
     GatewayConfig,
     MetricsConfig,
@@ -154,12 +155,12 @@ def parse_bus(
     table = Table(ctx, data, path, _BUS_KEYS)
     name = table.name("name")
     kind = table.choice("kind", REQUIRED, BUS_KINDS)
-    forbidden = _NETWORK_KEYS if kind == "rtu" else _SERIAL_KEYS
+    forbidden = _NETWORK_KEYS if kind is BusKind.RTU else _SERIAL_KEYS
     for key in forbidden:
         if table.has(key):
-            allowed_kinds = "rtu" if key in _SERIAL_KEYS else ", ".join(NETWORK_KINDS)
+            allowed_kinds = BusKind.RTU if key in _SERIAL_KEYS else ", ".join(NETWORK_KINDS)
             raise table.error(key, f"not used by kind = {kind!r}; allowed only with kind {allowed_kinds}")
-    if table.has("tls") and kind != "tls":
+    if table.has("tls") and kind is not BusKind.TLS:
         raise table.error("tls", f"[bus.tls] is not used by kind = {kind!r}; allowed only with kind tls")
 
     host: str | None = None
@@ -168,7 +169,7 @@ def parse_bus(
     baudrate, parity, stopbits, bytesize = 19200, "E", 1, 8
     serial_client = SERIAL_CLIENTS[0]
     tls: TlsConfig | None = None
-    if kind == "rtu":
+    if kind is BusKind.RTU:
         serial_port = table.required_string("serial_port", "a serial device such as /dev/ttyUSB0")
         if not serial_port.strip():
             raise table.error(
@@ -184,8 +185,8 @@ def parse_bus(
         serial_client = table.choice("serial_client", serial_client, SERIAL_CLIENTS)
     else:
         host = _network_host(table, "host")
-        port = table.integer("port", 802 if kind == "tls" else 502, *PORT)
-        if kind == "tls":
+        port = table.integer("port", 802 if kind is BusKind.TLS else 502, *PORT)
+        if kind is BusKind.TLS:
             tls = _parse_tls(ctx, table)
 
     timeout_s = table.number("timeout_s", 1.0, TIMEOUT_S, " s")

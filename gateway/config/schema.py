@@ -15,7 +15,16 @@ from pathlib import Path
 from typing import Final
 
 from ..errors import ConfigError
-from ..modbus.register_map import ENCODINGS, FRAME_ENCODINGS, MAX_READ_REGISTERS, DeviceChecks, RegisterMap
+from ..modbus.endpoint import BusKind, SerialClient
+from ..modbus.register_map import (
+    ENCODINGS,
+    FRAME_ENCODINGS,
+    MAX_READ_REGISTERS,
+    DeviceChecks,
+    Encoding,
+    RegisterMap,
+    config_word,
+)
 from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
 from ..model.conversion import Conversion
 from ..model.curves import CurveChannel, Drift
@@ -37,17 +46,20 @@ __all__ = [
     "SERIAL_CLIENTS",
     "STANDARD_BAUDRATES",
     "BusConfig",
+    "BusKind",
     "ChannelConfig",
     "DeviceConfig",
+    "Encoding",
     "GatewayConfig",
     "MetricsConfig",
     "RegisterMap",
+    "SerialClient",
     "TlsConfig",
 ]
 
-BUS_KINDS: Final = ("tcp", "rtu", "rtu-over-tcp", "tls")
+BUS_KINDS: Final = tuple(BusKind)
 #: Bus kinds that reach the device over the network (host and port).
-NETWORK_KINDS: Final = ("tcp", "rtu-over-tcp", "tls")
+NETWORK_KINDS: Final = tuple(k for k in BusKind if k.is_network)
 STANDARD_BAUDRATES: Final = (
     1200,
     2400,
@@ -68,9 +80,8 @@ STANDARD_BAUDRATES: Final = (
     4000000,
 )
 PARITIES: Final = ("N", "E", "O")
-#: Who frames Modbus RTU on a serial line: pymodbus' client, or the gateway's own direct
-#: framing (``gateway.modbus.rtu_line``) for lines polled thousands of times a second.
-SERIAL_CLIENTS: Final = ("pymodbus", "direct")
+#: Who frames Modbus RTU on a serial line (``SerialClient``).
+SERIAL_CLIENTS: Final = tuple(SerialClient)
 MAX_CHANNELS: Final = 256
 #: Channel positions must lie within this many millimetres of the origin.
 MAX_POSITION_MM: Final = 10_000.0
@@ -111,7 +122,7 @@ def check_number(where: str, name: str, value: object, interval: Interval, unit:
 def check_choice(where: str, name: str, value: object, choices: tuple[object, ...]) -> None:
     """``ConfigError`` unless ``value`` is one of ``choices``."""
     if value not in choices:
-        shown = ", ".join(repr(c) if isinstance(c, str) else str(c) for c in choices)
+        shown = ", ".join(repr(str(c)) if isinstance(c, str) else str(c) for c in choices)
         raise ConfigError(f"{where}: {name}: {value!r} is not allowed; allowed: {shown}")
 
 
@@ -198,8 +209,7 @@ class ChannelConfig:
                 )
         if self.conversion is not None and not isinstance(self.conversion, CurveChannel):
             raise ConfigError(
-                f"{where}: conversion: expected None or a CurveChannel, "
-                f"got {type(self.conversion).__name__}"
+                f"{where}: conversion: expected None or a CurveChannel, got {type(self.conversion).__name__}"
             )
 
 
@@ -214,7 +224,7 @@ class DeviceConfig:
 
     name: str
     device_id: int
-    encoding: str
+    encoding: Encoding
     n_channels: int
     registers: RegisterMap
     front_end: FrontEnd
@@ -231,14 +241,15 @@ class DeviceConfig:
         where = f"device {self.name!r}"
         check_integer(where, "device_id", self.device_id, *DEVICE_ID)
         check_choice(where, "encoding", self.encoding, ENCODINGS)
+        object.__setattr__(self, "encoding", config_word(Encoding, where, "encoding", self.encoding))
         frame = self.registers.frame
-        if frame is not None and FRAME_ENCODINGS[frame.quantity] != self.encoding:
+        if frame is not None and FRAME_ENCODINGS[frame.quantity] is not self.encoding:
             raise ConfigError(f"{where}: encoding: {self.encoding!r} but the frame carries {frame.quantity}")
-        if self.encoding == "output" and frame is None:
+        if self.encoding is Encoding.OUTPUT and frame is None:
             raise ConfigError(
                 f"{where}: encoding: 'output' (the device's own force or pressure) needs a frame"
             )
-        if self.output_drift is not None and self.encoding != "output":
+        if self.output_drift is not None and self.encoding is not Encoding.OUTPUT:
             raise ConfigError(
                 f"{where}: output_drift applies to a device's own force or pressure output only"
             )
@@ -289,7 +300,7 @@ class BusConfig:
     """One Modbus connection (a TCP socket or a serial line) and the devices polled over it."""
 
     name: str
-    kind: str
+    kind: BusKind
     host: str | None
     port: int | None
     serial_port: str | None
@@ -305,14 +316,18 @@ class BusConfig:
     backoff_initial_s: float
     backoff_max_s: float
     devices: tuple[DeviceConfig, ...]
-    #: who frames RTU on the serial line (``SERIAL_CLIENTS``); only ``kind = "rtu"`` uses it
-    serial_client: str = "pymodbus"
+    #: who frames RTU on the serial line; only ``kind = "rtu"`` uses it
+    serial_client: SerialClient = SerialClient.PYMODBUS
 
     def __post_init__(self) -> None:
         where = f"bus {self.name!r}"
         check_choice(where, "kind", self.kind, BUS_KINDS)
         check_choice(where, "serial_client", self.serial_client, SERIAL_CLIENTS)
-        if self.kind == "rtu":
+        object.__setattr__(self, "kind", config_word(BusKind, where, "kind", self.kind))
+        object.__setattr__(
+            self, "serial_client", config_word(SerialClient, where, "serial_client", self.serial_client)
+        )
+        if self.kind is BusKind.RTU:
             if not isinstance(self.serial_port, str) or not self.serial_port.strip():
                 raise ConfigError(f"{where}: serial_port: expected a serial device such as /dev/ttyUSB0")
             check_choice(where, "baudrate", self.baudrate, STANDARD_BAUDRATES)
@@ -323,7 +338,7 @@ class BusConfig:
             if not isinstance(self.host, str) or not self.host:
                 raise ConfigError(f"{where}: host: expected a host name or IP address, got {self.host!r}")
             check_integer(where, "port", self.port, *PORT)
-        if (self.kind == "tls") != (self.tls is not None):
+        if (self.kind is BusKind.TLS) != (self.tls is not None):
             raise ConfigError(f"{where}: tls: kind 'tls' needs TLS settings, and only it uses them")
         check_number(where, "timeout_s", self.timeout_s, TIMEOUT_S, " s")
         check_integer(where, "retries", self.retries, *RETRIES)
@@ -346,7 +361,7 @@ class BusConfig:
     @property
     def endpoint(self) -> str:
         """``host:port`` (``[v6]:port``) for network buses, the serial port for ``rtu``."""
-        if self.kind == "rtu":
+        if self.kind is BusKind.RTU:
             return self.serial_port or ""
         host = self.host or ""
         return f"[{host}]:{self.port}" if ":" in host else f"{host}:{self.port}"

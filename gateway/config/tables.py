@@ -13,7 +13,7 @@ import stat
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, TypeVar
 
 from ..errors import ConfigError
 from ..keys import check_keys, suggest
@@ -66,6 +66,8 @@ class Required:
 
 
 REQUIRED: Final = Required()
+#: The words a key allows: ``str``, or one ``keys.Choice`` enum's members.
+_Word = TypeVar("_Word", bound=str)
 
 
 def type_name(value: object) -> str:
@@ -202,7 +204,9 @@ class Table:
         assert value is not None  # a required key is never None
         return value
 
-    def choice(self, key: str, default: str | Required, choices: Sequence[str]) -> str:
+    def choice(self, key: str, default: str | Required, choices: Sequence[_Word]) -> _Word:
+        """The value of ``key``: the one of ``choices`` it spells (a ``keys.Choice`` member
+        when they are one enum's), ``default`` (spelt the same) when absent."""
         listed = " | ".join(choices)
         expected = f"one of {listed}"
         value = self._get(key, default, expected)
@@ -212,7 +216,7 @@ class Table:
             raise self.error(
                 key, f"{value!r} is not allowed{suggest(value, choices, 0.3)} (allowed: {listed})"
             )
-        return value
+        return choices[choices.index(value)]
 
     def name(self, key: str) -> str:
         value = self.required_string(key, _NAME_RULE)

@@ -20,7 +20,10 @@ from ..modbus.register_map import (
     DeviceChecks,
     DeviceClock,
     DeviceWrite,
+    Encoding,
     FrameBlock,
+    FrameQuantity,
+    FrameTable,
     RegisterCheck,
     RegisterMap,
     ValueFrame,
@@ -83,18 +86,23 @@ FRAME_ORDERS: Final = (
     "ABCD", "CDAB", "BADC", "DCBA", "AB", "BA", "ABCDEFGH", "HGFEDCBA", "BADCFEHG", "GHEFCDAB"
 )  # fmt: skip
 #: Default units of each quantity.
-_DEFAULT_UNITS: Final = {"counts": "counts", "resistance": "ohm", "force": "N", "pressure": "kPa"}
+_DEFAULT_UNITS: Final = {
+    FrameQuantity.COUNTS: "counts",
+    FrameQuantity.RESISTANCE: "ohm",
+    FrameQuantity.FORCE: "N",
+    FrameQuantity.PRESSURE: "kPa",
+}
 _ANY_NUMBER: Final = Interval(-1e300, 1e300, low_inclusive=True)
 _COUNT_CHECK_KEYS: Final = ("table", "address")
 
 
 def parse_registers(
-    table: Table, n: int, encoding: str, profile: str | None, frame: ValueFrame | None = None
+    table: Table, n: int, encoding: Encoding, profile: str | None, frame: ValueFrame | None = None
 ) -> RegisterMap:
     """``[bus.device.registers]``; with a ``frame`` the channel values come from it, and the
     table may give only the status, reference, temperature and clock addresses."""
     span = status_span(n)
-    value_key = "adc_address" if encoding == "adc" else "float_address"
+    value_key = "adc_address" if encoding == Encoding.ADC else "float_address"
     if frame is not None:
         for key in ("adc_address", "float_address"):
             if table.has(key):
@@ -157,7 +165,7 @@ def parse_frame(table: Table, n: int, max_read: int) -> ValueFrame | None:
     offset = table.number("offset", 0.0, _ANY_NUMBER)
     source = table.choice("table", "input", FRAME_TABLES)
     vendor = None
-    if source == "vendor":
+    if source == FrameTable.VENDOR:
         code = table.integer("function_code", REQUIRED, 1, 127, " (a vendor-defined function code)")
         request = table.table("request", _REQUEST_KEYS, "request = { address_bytes = 2, count_bytes = 2 }")
         try:

@@ -9,7 +9,7 @@ second.
 from __future__ import annotations
 
 from .client import ModbusTransport
-from .endpoint import Endpoint
+from .endpoint import BusKind, Endpoint, SerialClient
 from .rtu_line import RtuLineTransport
 from .transport import Transport
 
@@ -18,6 +18,6 @@ __all__ = ["open_transport"]
 
 def open_transport(bus: Endpoint) -> Transport:
     """The transport of ``bus`` (not yet connected)."""
-    if bus.kind == "rtu" and bus.serial_client == "direct":
+    if bus.kind is BusKind.RTU and bus.serial_client is SerialClient.DIRECT:
         return RtuLineTransport(bus)
     return ModbusTransport(bus)

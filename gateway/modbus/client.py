@@ -37,7 +37,7 @@ import functools
 import logging
 import ssl
 from collections.abc import Awaitable, Callable
-from typing import Any, ClassVar
+from typing import Any, ClassVar, assert_never
 
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, AsyncModbusTlsClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -52,13 +52,12 @@ from ..errors import (
     DeviceTimeoutError,
     GatewayError,
 )
-from .endpoint import Endpoint, TlsSettings
+from .endpoint import BusKind, Endpoint, TlsSettings
+from .register_map import RegisterKind
 from .transport import (
     DEVICE_ID_OBJECTS,
     EXCEPTION_NAMES,
     FC_DEVICE_ID,
-    FC_READ_HOLDING,
-    FC_READ_INPUT,
     FC_WRITE_MULTIPLE,
     FC_WRITE_SINGLE,
     Transport,
@@ -151,7 +150,7 @@ class ModbusTransport(Transport):
         self._ssl_context: ssl.SSLContext | None = None
         #: function code -> read format registered with the current client's decoder
         self._vendor_registered: dict[int, VendorRead] = {}
-        if bus.kind == "tls":
+        if bus.kind is BusKind.TLS:
             if bus.tls is None:
                 raise GatewayError(f"bus {bus.name!r}: kind 'tls' needs a [tls] table")
             self._ssl_context = build_ssl_context(bus.tls)
@@ -164,7 +163,7 @@ class ModbusTransport(Transport):
     @property
     def target(self) -> str:
         b = self.bus
-        if b.kind == "rtu":
+        if b.kind is BusKind.RTU:
             return f"{b.serial_port} ({b.baudrate} baud)"
         return f"{b.host}:{b.port} ({b.kind})"
 
@@ -175,7 +174,7 @@ class ModbusTransport(Transport):
     @property
     def is_serial_framing(self) -> bool:
         """True when frames carry no transaction id (RTU): a late answer could be misread."""
-        return self.bus.kind in ("rtu", "rtu-over-tcp")
+        return self.bus.kind in (BusKind.RTU, BusKind.RTU_OVER_TCP)
 
     @property
     def quiet_after_send_s(self) -> float:
@@ -183,7 +182,7 @@ class ModbusTransport(Transport):
         line the request itself takes (8 bytes + 3.5 characters of silence) x bits per
         character / baud to go out; over a network, no time at all."""
         b = self.bus
-        if b.kind != "rtu":
+        if b.kind is not BusKind.RTU:
             return 0.0
         bits_per_char = 1 + int(b.bytesize) + (0 if str(b.parity) == "N" else 1) + int(b.stopbits)
         return (8 + 3.5) * bits_per_char / float(b.baudrate)
@@ -199,22 +198,22 @@ class ModbusTransport(Transport):
             "trace_connect": self._trace_connect,
         }
         client: AsyncModbusTcpClient | AsyncModbusSerialClient
-        port = int(b.port or (802 if b.kind == "tls" else 502))
-        if b.kind == "tcp":
+        port = int(b.port or (802 if b.kind is BusKind.TLS else 502))
+        if b.kind is BusKind.TCP:
             client = AsyncModbusTcpClient(
                 str(b.host),
                 port=port,
                 framer=FramerType.SOCKET,
                 **common,
             )
-        elif b.kind == "rtu-over-tcp":
+        elif b.kind is BusKind.RTU_OVER_TCP:
             client = AsyncModbusTcpClient(
                 str(b.host),
                 port=port,
                 framer=FramerType.RTU,
                 **common,
             )
-        elif b.kind == "tls":
+        elif b.kind is BusKind.TLS:
             assert self._ssl_context is not None
             client = AsyncModbusTlsClient(
                 str(b.host),
@@ -227,7 +226,7 @@ class ModbusTransport(Transport):
                 # pymodbus verifies against ``host``; the config may name another identity
                 create_tls: Any = client.ctx.call_create
                 client.ctx.call_create = functools.partial(create_tls, server_hostname=tls.server_hostname)
-        elif b.kind == "rtu":
+        elif b.kind is BusKind.RTU:
             client = AsyncModbusSerialClient(
                 str(b.serial_port),
                 framer=FramerType.RTU,
@@ -289,7 +288,7 @@ class ModbusTransport(Transport):
         self._vendor_registered = {}
         try:
             ok = await client.connect()
-            if ok and self.bus.kind == "rtu":
+            if ok and self.bus.kind is BusKind.RTU:
                 # the serial transport finishes its set-up on the next loop iterations
                 for _ in range(3):
                     await asyncio.sleep(0)
@@ -300,7 +299,7 @@ class ModbusTransport(Transport):
         if not ok or not client.connected:
             reason = self._connect_error or "no connection"
             raise DeviceConnectionError(f"bus {self.name!r}: cannot connect to {self.target}: {reason}")
-        if self.bus.kind == "rtu":
+        if self.bus.kind is BusKind.RTU:
             self._write_requests_at_once(client)
             self._discard_waiting_input(client)
 
@@ -408,23 +407,23 @@ class ModbusTransport(Transport):
             raise DeviceConnectionError(f"bus {self.name!r}: not connected to {self.target}")
         return client
 
-    async def _read(self, kind: str, device_id: int, address: int, count: int, what: str) -> list[int]:
+    async def _read(
+        self, kind: RegisterKind, device_id: int, address: int, count: int, what: str
+    ) -> list[int]:
         """The registers of a read answer; a wrong function is a ``DecodeError``.
 
         pymodbus decodes each register from two bytes, so values are always 0..65535.
         """
         client = self._live_client()
-        if kind == "input":
-            response = await self._execute(
-                what, client.read_input_registers(address, count=count, device_id=device_id)
-            )
-            function_code = FC_READ_INPUT
-        else:
-            response = await self._execute(
-                what, client.read_holding_registers(address, count=count, device_id=device_id)
-            )
-            function_code = FC_READ_HOLDING
-        if response.function_code != function_code:
+        match kind:
+            case RegisterKind.INPUT:
+                read = client.read_input_registers
+            case RegisterKind.HOLDING:
+                read = client.read_holding_registers
+            case _:
+                assert_never(kind)
+        response = await self._execute(what, read(address, count=count, device_id=device_id))
+        if response.function_code != kind.read_function:
             raise DecodeError(f"{what}: answer has function {response.function_code}")
         registers: list[int] = getattr(response, "registers", None) or []
         return registers

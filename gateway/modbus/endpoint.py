@@ -9,7 +9,32 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Protocol
 
-__all__ = ["Endpoint", "TlsSettings"]
+from ..keys import Choice
+
+__all__ = ["BusKind", "Endpoint", "SerialClient", "TlsSettings"]
+
+
+class BusKind(Choice):
+    """How a bus frames Modbus: TCP (MBAP header), RTU on a serial line, RTU frames over a TCP
+    socket, or Modbus/TCP over TLS."""
+
+    TCP = "tcp"
+    RTU = "rtu"
+    RTU_OVER_TCP = "rtu-over-tcp"
+    TLS = "tls"
+
+    @property
+    def is_network(self) -> bool:
+        """Reached over the network (host and port), not a serial line."""
+        return self is not BusKind.RTU
+
+
+class SerialClient(Choice):
+    """Who frames Modbus RTU on a serial line: pymodbus' client, or the gateway's own direct
+    framing (``rtu_line``) for lines polled thousands of times a second."""
+
+    PYMODBUS = "pymodbus"
+    DIRECT = "direct"
 
 
 class TlsSettings(Protocol):
@@ -39,7 +64,7 @@ class Endpoint(Protocol):
     def name(self) -> str: ...
 
     @property
-    def kind(self) -> str: ...
+    def kind(self) -> BusKind: ...
 
     @property
     def host(self) -> str | None: ...
@@ -66,8 +91,8 @@ class Endpoint(Protocol):
     def tls(self) -> TlsSettings | None: ...
 
     @property
-    def serial_client(self) -> str:
-        """Who frames RTU on a serial line: "pymodbus" or "direct" (``rtu_line``)."""
+    def serial_client(self) -> SerialClient:
+        """Who frames RTU on a serial line (``rtu_line`` when direct)."""
         ...
 
     @property

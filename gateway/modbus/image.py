@@ -21,25 +21,33 @@ from numpy.typing import NDArray
 
 from ..errors import DecodeError
 from .decode import decode_bitmap, decode_float32, decode_uint16, decode_values, register_value
-from .register_map import STATUS_BITMAP_STRIDE, DeviceLayout, ValueFrame, frame_space, status_registers
+from .register_map import (
+    STATUS_BITMAP_STRIDE,
+    DeviceLayout,
+    Encoding,
+    FrameQuantity,
+    RegisterKind,
+    RegisterSpace,
+    ValueFrame,
+    frame_space,
+    status_registers,
+)
 
-__all__ = ["ImageBlock", "RawSample", "RegisterImage", "RegisterKind", "decode_sample"]
+__all__ = ["ImageBlock", "RawSample", "RegisterImage", "RegisterKind", "RegisterSpace", "decode_sample"]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-#: a register space: ``input``, ``holding`` or a frame block's (``register_map.frame_space``)
-RegisterKind = str
 
 
 @dataclass(frozen=True)
 class ImageBlock:
     """Registers read by one request: ``values[k]`` is the register at ``address + k``."""
 
-    kind: RegisterKind
+    kind: RegisterSpace
     address: int
     values: NDArray[np.uint16]
 
-    def covers(self, kind: str, address: int, count: int) -> bool:
+    def covers(self, kind: RegisterSpace, address: int, count: int) -> bool:
         return (
             kind == self.kind
             and self.address <= address
@@ -55,7 +63,7 @@ class RegisterImage:
 
     @classmethod
     def from_reads(
-        cls, reads: Iterable[tuple[RegisterKind, int, Sequence[int] | NDArray[np.uint16]]]
+        cls, reads: Iterable[tuple[RegisterSpace, int, Sequence[int] | NDArray[np.uint16]]]
     ) -> RegisterImage:
         blocks = []
         for kind, address, values in reads:
@@ -64,7 +72,7 @@ class RegisterImage:
             blocks.append(ImageBlock(kind, int(address), arr))
         return cls(tuple(blocks))
 
-    def get(self, kind: RegisterKind, address: int, count: int) -> NDArray[np.uint16] | None:
+    def get(self, kind: RegisterSpace, address: int, count: int) -> NDArray[np.uint16] | None:
         """The registers ``address .. address + count - 1`` or None when not read."""
         for b in self.blocks:
             if b.covers(kind, address, count):
@@ -72,7 +80,7 @@ class RegisterImage:
                 return b.values[start : start + count]
         return None
 
-    def require(self, kind: RegisterKind, address: int, count: int, what: str) -> NDArray[np.uint16]:
+    def require(self, kind: RegisterSpace, address: int, count: int, what: str) -> NDArray[np.uint16]:
         regs = self.get(kind, address, count)
         if regs is None:
             raise DecodeError(f"{what}: {kind} registers {address}..{address + count - 1} were not read")
@@ -133,23 +141,25 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
     regs = device.registers
     n = device.n_channels
     wo, bo = regs.word_order, regs.byte_order
-    table: RegisterKind = "holding" if regs.table == "holding" else "input"
+    table: RegisterKind = regs.table
     counts: Any = None
     resistance = output_force = output_pressure = None
     if regs.frame is not None:
         values = decode_frame(regs.frame, image)
         quantity = regs.frame.quantity
-        if quantity == "counts":
+        if quantity is FrameQuantity.COUNTS:
             counts = values
-        elif quantity == "resistance":
+        elif quantity is FrameQuantity.RESISTANCE:
             resistance = np.asarray(values, dtype=np.float64)
-        elif quantity == "force":
+        elif quantity is FrameQuantity.FORCE:
             output_force = np.asarray(values, dtype=np.float64)
-        else:
+        elif quantity is FrameQuantity.PRESSURE:
             output_pressure = np.asarray(values, dtype=np.float64)
-    elif device.encoding == "adc":
+        else:
+            raise DecodeError(f"unknown frame quantity {quantity!r}")
+    elif device.encoding is Encoding.ADC:
         counts = decode_uint16(image.require(table, regs.adc_address, n, "ADC counts"), bo)
-    elif device.encoding == "float32":
+    elif device.encoding is Encoding.FLOAT32:
         raw = image.require(table, regs.float_address, 2 * n, "float32 resistances")
         resistance = decode_float32(raw, wo, bo)
     else:
@@ -173,8 +183,7 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
     device_time = ticks = None
     clock = regs.clock
     if clock is not None:
-        clock_kind: RegisterKind = "holding" if clock.table == "holding" else "input"
-        words = image.get(clock_kind, clock.address, clock.registers)
+        words = image.get(clock.table, clock.address, clock.registers)
         if words is not None:
             ticks = register_value(words.tolist(), wo, bo)
             device_time = ticks * clock.tick_s

@@ -12,7 +12,16 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
-from .register_map import MAX_READ_REGISTERS, DeviceClock, DeviceLayout, RegisterBlock, register_blocks
+from .register_map import (
+    MAX_READ_REGISTERS,
+    REGISTER_TABLES,
+    DeviceClock,
+    DeviceLayout,
+    RegisterBlock,
+    RegisterKind,
+    RegisterSpace,
+    register_blocks,
+)
 from .vendor_fc import VendorRead
 
 __all__ = [
@@ -40,7 +49,7 @@ class ReadRequest:
     it covers, in address order, e.g. ``("status", "adc")``.
     """
 
-    kind: str
+    kind: RegisterSpace
     address: int
     count: int
     purpose: tuple[str, ...]
@@ -48,9 +57,10 @@ class ReadRequest:
     select: tuple[int, int] | None = None
 
     @property
-    def table(self) -> str:
-        """The register table a standard read uses (``input`` or ``holding``)."""
-        return self.kind.partition("@")[0]
+    def table(self) -> RegisterKind:
+        """The register table a standard read uses (``input`` or ``holding``; ``ValueError``
+        for a vendor read's space or any other word: no read falls back to a table)."""
+        return RegisterKind(self.kind.partition("@")[0])
 
     @property
     def end(self) -> int:
@@ -73,14 +83,14 @@ def read_plan(
     if max_gap < 0:
         raise ValueError(f"max_gap = {max_gap} must be >= 0")
     blocks = register_blocks(device, clock=False)
-    widest = max((b.value_registers for b in blocks if b.kind in ("holding", "input")), default=1)
+    widest = max((b.value_registers for b in blocks if b.kind in REGISTER_TABLES), default=1)
     if widest > max_read_registers:
         raise ValueError(
             f"max_read_registers = {max_read_registers} cannot hold a float32 value (2 registers, "
             f"never split across reads); allowed: 2..{MAX_READ_REGISTERS}"
         )
     requests: list[ReadRequest] = []
-    for kind in ("holding", "input"):
+    for kind in (RegisterKind.HOLDING, RegisterKind.INPUT):
         # Every value of every block as (start, registers, purpose), in address order.
         units = sorted(
             (b.address + k * b.value_registers, b.value_registers, b.purpose)
@@ -118,7 +128,7 @@ def _frame_requests(device: DeviceLayout, blocks: Sequence[RegisterBlock]) -> li
         return []
     out: list[ReadRequest] = []
     for block, fb in zip((b for b in blocks if b.purpose == "frame"), frame.blocks, strict=True):
-        if block.kind in ("holding", "input"):
+        if block.kind in REGISTER_TABLES:
             continue
         select = None
         if fb.row is not None and frame.row_select_address is not None:

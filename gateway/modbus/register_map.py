@@ -23,9 +23,10 @@ of a named action (a device zero). Nothing else is ever written.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final, Protocol
+from typing import Final, Protocol, TypeVar
 
 from ..errors import ConfigError
+from ..keys import Choice
 from .vendor_fc import VendorRead
 
 __all__ = [
@@ -48,22 +49,89 @@ __all__ = [
     "DeviceClock",
     "DeviceLayout",
     "DeviceWrite",
+    "Encoding",
     "FrameBlock",
+    "FrameQuantity",
+    "FrameTable",
     "RegisterBlock",
     "RegisterCheck",
+    "RegisterKind",
     "RegisterMap",
+    "RegisterSpace",
     "ValueFrame",
+    "config_word",
     "frame_space",
     "register_blocks",
     "status_registers",
     "status_span",
 ]
 
-#: How a device reports each channel: ``adc`` counts of a divider, ``float32`` ohm, or its
-#: own calibrated ``output`` (force or pressure; only through a ``ValueFrame``).
-ENCODINGS: Final = ("adc", "float32", "output")
+
+class Encoding(Choice):
+    """How a device reports each channel: ``adc`` counts of a divider, ``float32`` ohm, or its
+    own calibrated ``output`` (force or pressure; only through a ``ValueFrame``)."""
+
+    ADC = "adc"
+    FLOAT32 = "float32"
+    OUTPUT = "output"
+
+
+class RegisterKind(Choice):
+    """A Modbus register table: ``input`` (read with function 4) or ``holding`` (function 3)."""
+
+    INPUT = "input"
+    HOLDING = "holding"
+
+    @property
+    def read_function(self) -> int:
+        """The function code that reads this table."""
+        return _READ_FUNCTIONS[self]
+
+
+_READ_FUNCTIONS: Final = {RegisterKind.INPUT: 4, RegisterKind.HOLDING: 3}
+
+
+class FrameQuantity(Choice):
+    """What a ``ValueFrame``'s values are: ADC counts, resistance, or the device's own force or
+    pressure."""
+
+    COUNTS = "counts"
+    RESISTANCE = "resistance"
+    FORCE = "force"
+    PRESSURE = "pressure"
+
+
+class FrameTable(Choice):
+    """Where a frame's blocks are read: function 4, function 3, or a vendor-defined function."""
+
+    INPUT = "input"
+    HOLDING = "holding"
+    VENDOR = "vendor"
+
+
+_Word = TypeVar("_Word", bound=Choice)
+
+
+def config_word(kind: type[_Word], where: str, name: str, value: object) -> _Word:
+    """``value`` as a member of ``kind``; ``ConfigError`` naming ``where``, ``name``, the
+    closest and every allowed word otherwise."""
+    if isinstance(value, str):
+        try:
+            return kind(value)
+        except ValueError as exc:
+            raise ConfigError(f"{where}: {name}: {exc}") from None
+    allowed = ", ".join(repr(m.value) for m in kind)
+    raise ConfigError(f"{where}: {name}: {value!r} is not allowed; allowed: {allowed}")
+
+
+ENCODINGS: Final = tuple(Encoding)
 #: The encoding a frame's quantity stands for.
-FRAME_ENCODINGS: Final = {"counts": "adc", "resistance": "float32", "force": "output", "pressure": "output"}
+FRAME_ENCODINGS: Final = {
+    FrameQuantity.COUNTS: Encoding.ADC,
+    FrameQuantity.RESISTANCE: Encoding.FLOAT32,
+    FrameQuantity.FORCE: Encoding.OUTPUT,
+    FrameQuantity.PRESSURE: Encoding.OUTPUT,
+}
 BYTE_ORDERS: Final = ("big", "little")
 #: The three status bitmaps (open, short, saturated) start 16 registers apart.
 STATUS_BITMAP_STRIDE: Final = 16
@@ -78,7 +146,7 @@ MAX_WRITE_REGISTERS: Final = 123
 DEVICE_TIME_ADDRESS: Final = 2
 DEVICE_TIME_REGISTERS: Final = 4
 #: Register tables: ``input`` (function 4) and ``holding`` (function 3).
-REGISTER_TABLES: Final = ("input", "holding")
+REGISTER_TABLES: Final = tuple(RegisterKind)
 #: A clock is an unsigned counter of this many registers (16, 32 or 64 bit).
 CLOCK_REGISTERS: Final = (1, 2, 4)
 #: Clock units and their tick in seconds.
@@ -93,9 +161,9 @@ def _check_address(where: str, name: str, value: object, span: int = 1) -> None:
         raise ConfigError(f"{where}: {name}: {value!r} is out of range; allowed: 0..{high}")
 
 
-def _check_table(where: str, value: object) -> None:
-    if value not in REGISTER_TABLES:
-        raise ConfigError(f"{where}: table: {value!r} is not allowed; allowed: 'input', 'holding'")
+def _set_table(owner: DeviceClock | RegisterCheck | RegisterMap, where: str) -> None:
+    """A frozen dataclass's ``table`` as a ``RegisterKind`` (``ConfigError`` for anything else)."""
+    object.__setattr__(owner, "table", config_word(RegisterKind, where, "table", owner.table))
 
 
 @dataclass(frozen=True)
@@ -108,10 +176,10 @@ class DeviceClock:
     address: int
     registers: int = 4
     tick_s: float = 1e-3
-    table: str = "input"
+    table: RegisterKind = RegisterKind.INPUT
 
     def __post_init__(self) -> None:
-        _check_table("clock", self.table)
+        _set_table(self, "clock")
         if self.registers not in CLOCK_REGISTERS:
             raise ConfigError(f"clock: registers: {self.registers!r} is not allowed; allowed: 1, 2, 4")
         _check_address("clock", "address", self.address, self.registers)
@@ -138,12 +206,12 @@ class RegisterCheck:
     answering anything else is not the device the configuration describes."""
 
     what: str
-    table: str
+    table: RegisterKind
     address: int
     value: int
 
     def __post_init__(self) -> None:
-        _check_table(f"check {self.what!r}", self.table)
+        _set_table(self, f"check {self.what!r}")
         _check_address(f"check {self.what!r}", "address", self.address)
         if isinstance(self.value, bool) or not isinstance(self.value, int) or not 0 <= self.value <= 0xFFFF:
             raise ConfigError(
@@ -172,16 +240,30 @@ class DeviceChecks:
 
 #: What a frame's values can be, with each unit's factor to the gateway's base unit (counts,
 #: ohm, N, kPa).
-FRAME_QUANTITIES: Final[dict[str, dict[str, float]]] = {
-    "counts": {"counts": 1.0},
-    "resistance": {"ohm": 1.0, "kohm": 1e3, "Mohm": 1e6},
-    "force": {"N": 1.0, "mN": 1e-3, "kN": 1e3, "gf": 9.80665e-3, "kgf": 9.80665, "lbf": 4.4482216152605},
-    "pressure": {"kPa": 1.0, "Pa": 1e-3, "MPa": 1e3, "mbar": 0.1, "bar": 100.0, "psi": 6.894757293168},
+FRAME_QUANTITIES: Final[dict[FrameQuantity, dict[str, float]]] = {
+    FrameQuantity.COUNTS: {"counts": 1.0},
+    FrameQuantity.RESISTANCE: {"ohm": 1.0, "kohm": 1e3, "Mohm": 1e6},
+    FrameQuantity.FORCE: {
+        "N": 1.0,
+        "mN": 1e-3,
+        "kN": 1e3,
+        "gf": 9.80665e-3,
+        "kgf": 9.80665,
+        "lbf": 4.4482216152605,
+    },
+    FrameQuantity.PRESSURE: {
+        "kPa": 1.0,
+        "Pa": 1e-3,
+        "MPa": 1e3,
+        "mbar": 0.1,
+        "bar": 100.0,
+        "psi": 6.894757293168,
+    },
 }
 #: Registers per value of each type (``decode.VALUE_TYPES``' widths).
 FRAME_TYPE_WIDTHS: Final = {"uint16": 1, "int16": 1, "uint32": 2, "int32": 2, "float32": 2, "float64": 4}
 #: Where a frame's blocks are read: function 4, function 3, or a vendor-defined function code.
-FRAME_TABLES: Final = ("input", "holding", "vendor")
+FRAME_TABLES: Final = tuple(FrameTable)
 
 
 @dataclass(frozen=True)
@@ -203,13 +285,13 @@ class ValueFrame:
     ``table`` is ``"vendor"``; ``row_select_address`` the holding register a row's number is
     written to before that row's block is read."""
 
-    quantity: str
+    quantity: FrameQuantity
     unit: str
     value_type: str
     order: str
     scale: float
     offset: float
-    table: str
+    table: FrameTable
     blocks: tuple[FrameBlock, ...]
     vendor: VendorRead | None = None
     row_select_address: int | None = None
@@ -232,7 +314,9 @@ class ValueFrame:
             raise ConfigError(
                 f"frame: table: {self.table!r} is not allowed; allowed: {', '.join(FRAME_TABLES)}"
             )
-        if (self.table == "vendor") != (self.vendor is not None):
+        object.__setattr__(self, "quantity", FrameQuantity(self.quantity))
+        object.__setattr__(self, "table", FrameTable(self.table))
+        if (self.table is FrameTable.VENDOR) != (self.vendor is not None):
             raise ConfigError(
                 "frame: a vendor read needs table = 'vendor' and its function_code, and only it"
             )
@@ -271,14 +355,22 @@ class ValueFrame:
             for b in self.blocks
         )
         scaled = "" if (self.scale, self.offset) == (1.0, 0.0) else f" x {self.scale:g} + {self.offset:g}"
-        what = "ADC counts" if self.quantity == "counts" else f"{self.quantity} in {self.unit}"
+        what = "ADC counts" if self.quantity is FrameQuantity.COUNTS else f"{self.quantity} in {self.unit}"
         return f"{what}, {self.value_type} {self.order}{scaled}, {where}: {spans}"
 
 
-def frame_space(table: str, vendor: VendorRead | None = None, row: int | None = None) -> str:
-    """The name of the register space a block is read from, for the poll's register image:
-    ``input``, ``holding``, ``fc0x42`` (a vendor read), ``input@row3`` (behind a row select)."""
-    space = f"fc{vendor.function_code:#04x}" if vendor is not None else table
+#: The register space a block is read from, as the poll's register image names it: a
+#: ``RegisterKind`` (``input``, ``holding``), or a frame block's (``frame_space``).
+RegisterSpace = str
+
+
+def frame_space(table: FrameTable, vendor: VendorRead | None = None, row: int | None = None) -> RegisterSpace:
+    """The register space a frame block is read from: ``input``, ``holding`` (the
+    ``RegisterKind``), ``fc0x42`` (a vendor read), ``input@row3`` (behind a row select)."""
+    if vendor is not None:
+        space: RegisterSpace = f"fc{vendor.function_code:#04x}"
+    else:
+        space = RegisterKind(table)
     return space if row is None else f"{space}@row{row}"
 
 
@@ -335,7 +427,7 @@ class RegisterMap:
     force_reference_address: int | None = None
     temperature_address: int | None = None
     clock: DeviceClock | None = DeviceClock(DEVICE_TIME_ADDRESS, DEVICE_TIME_REGISTERS, 1e-3)
-    table: str = "input"
+    table: RegisterKind = RegisterKind.INPUT
     #: the channel values' own layout (None: ``adc_address`` or ``float_address`` of ``table``)
     frame: ValueFrame | None = None
     #: writes made at every connect, in order, before the first poll
@@ -344,7 +436,7 @@ class RegisterMap:
     actions: tuple[tuple[str, tuple[DeviceWrite, ...]], ...] = ()
 
     def __post_init__(self) -> None:
-        _check_table("register map", self.table)
+        _set_table(self, "register map")
         if self.clock is not None and not isinstance(self.clock, DeviceClock):
             raise ConfigError(f"register map: clock: expected a DeviceClock or None, got {self.clock!r}")
         for name in ("word_order", "byte_order"):
@@ -372,7 +464,7 @@ class DeviceLayout(Protocol):
     """What the register map needs to know of a device (a ``DeviceConfig`` is one)."""
 
     @property
-    def encoding(self) -> str: ...
+    def encoding(self) -> Encoding: ...
 
     @property
     def n_channels(self) -> int: ...
@@ -393,7 +485,7 @@ class RegisterBlock:
 
     name: str
     purpose: str
-    kind: str
+    kind: RegisterSpace
     address: int
     count: int
     value_registers: int
@@ -434,10 +526,12 @@ def register_blocks(device: DeviceLayout, clock: bool = True) -> tuple[RegisterB
             space = frame_space(f.table, f.vendor, b.row)
             count = b.values * f.width
             blocks.append(RegisterBlock(f"frame{k}", "frame", space, b.address, count, f.width))
-    elif device.encoding == "adc":
+    elif device.encoding is Encoding.ADC:
         blocks.append(RegisterBlock("adc", "adc", table, regs.adc_address, n, 1))
-    else:
+    elif device.encoding is Encoding.FLOAT32:
         blocks.append(RegisterBlock("float", "float", table, regs.float_address, 2 * n, 2))
+    else:
+        raise ConfigError(f"encoding {device.encoding!r} has no channel registers without a frame")
     if regs.force_reference_address is not None:
         blocks.append(
             RegisterBlock("force_reference", "force_reference", table, regs.force_reference_address, 2 * n, 2)

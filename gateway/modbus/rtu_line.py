@@ -47,12 +47,11 @@ import serial
 
 from ..errors import DecodeError, DeviceConnectionError, DeviceExceptionResponse, DeviceTimeoutError
 from .endpoint import Endpoint
+from .register_map import RegisterKind
 from .transport import (
     DEVICE_ID_OBJECTS,
     EXCEPTION_NAMES,
     FC_DEVICE_ID,
-    FC_READ_HOLDING,
-    FC_READ_INPUT,
     FC_WRITE_MULTIPLE,
     FC_WRITE_SINGLE,
     Transport,
@@ -325,8 +324,10 @@ class RtuLineTransport(Transport):
         return body[1:]
 
     # ------------------------------------------------------------------ requests
-    async def _read(self, kind: str, device_id: int, address: int, count: int, what: str) -> Sequence[int]:
-        fc = FC_READ_INPUT if kind == "input" else FC_READ_HOLDING
+    async def _read(
+        self, kind: RegisterKind, device_id: int, address: int, count: int, what: str
+    ) -> Sequence[int]:
+        fc = kind.read_function
         pdu = await self._transact(device_id, struct.pack(">BHH", fc, address, count), _byte_count_rule, what)
         if pdu[1] != len(pdu) - 2 or pdu[1] != 2 * count:
             raise DecodeError(f"{what}: answer of {pdu[1]} bytes, expected {2 * count}")

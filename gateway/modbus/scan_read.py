@@ -18,14 +18,14 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from ..errors import DeviceError, DeviceExceptionResponse, DeviceTimeoutError
-from .register_map import MAX_READ_REGISTERS
+from .register_map import MAX_READ_REGISTERS, RegisterKind
 from .scan import Snapshot
 from .transport import Transport
 
 __all__ = ["ScanRun", "TableReader", "scan_device"]
 
-#: Register tables in the order they are read and shown, with their read function codes.
-TABLES: dict[str, int] = {"input": 4, "holding": 3}
+#: Register tables in the order they are read and shown.
+TABLES: tuple[RegisterKind, ...] = (RegisterKind.INPUT, RegisterKind.HOLDING)
 #: Exception codes that mean "not these addresses": the read is split.
 BISECT_CODES = frozenset({2, 3, 4})
 ILLEGAL_FUNCTION = 1
@@ -64,12 +64,12 @@ class TableReader:
     read only those, split again if the device refuses one of them after all.
     """
 
-    def __init__(self, transport: Transport, device_id: int, table: str, ranges: Sequence[Range]) -> None:
-        if table not in TABLES:
-            raise ValueError(f"unknown register table {table!r}")
+    def __init__(
+        self, transport: Transport, device_id: int, table: RegisterKind, ranges: Sequence[Range]
+    ) -> None:
         self.transport = transport
         self.device_id = device_id
-        self.table = table
+        self.table = RegisterKind(table)  # a misspelt table is a ValueError naming both
         self.addresses = [a for lo, hi in ranges for a in range(lo, hi + 1)]
         self.unsupported = False
         self._spans = _chunks(ranges)
@@ -77,9 +77,7 @@ class TableReader:
         self._answered = 0
 
     async def _request(self, address: int, count: int) -> list[int]:
-        if self.table == "input":
-            return await self.transport.read_input_registers(self.device_id, address, count)
-        return await self.transport.read_holding_registers(self.device_id, address, count)
+        return await self.transport.read_registers(self.device_id, self.table, address, count)
 
     async def read(self) -> dict[int, int | None]:
         """Every address of the ranges: its value, or None where the device refused it."""
@@ -140,7 +138,7 @@ RoundView = Callable[[int, Registers, Registers | None], None]
 async def scan_device(
     transport: Transport,
     device_id: int,
-    ranges: Mapping[str, Sequence[Range]],
+    ranges: Mapping[RegisterKind, Sequence[Range]],
     rounds: int,
     interval_s: float,
     view: RoundView | None = None,
@@ -175,7 +173,7 @@ async def scan_device(
     for r in readers:
         if r.unsupported:
             run.notes.append(
-                f"the device does not support function {TABLES[r.table]} ({r.table} registers): "
+                f"the device does not support function {r.table.read_function} ({r.table} registers): "
                 "exception 1, illegal function"
             )
     return run

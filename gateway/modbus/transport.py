@@ -48,15 +48,13 @@ from ..errors import (
     WriteNotAllowedError,
 )
 from .plan import ReadRequest
-from .register_map import MAX_READ_REGISTERS, MAX_WRITE_REGISTERS
+from .register_map import MAX_READ_REGISTERS, MAX_WRITE_REGISTERS, RegisterKind
 from .vendor_fc import VendorRead
 
 log = logging.getLogger(__name__)
 
 
-#: Modbus function codes the backends send.
-FC_READ_HOLDING = 0x03
-FC_READ_INPUT = 0x04
+#: Modbus function codes the backends send (the reads: ``RegisterKind.read_function``).
 FC_WRITE_SINGLE = 0x06
 FC_WRITE_MULTIPLE = 0x10
 FC_DEVICE_ID = 0x2B  # encapsulated interface (MEI); type 14: read device identification
@@ -140,8 +138,10 @@ class Transport(abc.ABC):
         """Close the connection, if any."""
 
     @abc.abstractmethod
-    async def _read(self, kind: str, device_id: int, address: int, count: int, what: str) -> Sequence[int]:
-        """Function 4 (``kind`` "input") or 3 ("holding"): the registers the device sent."""
+    async def _read(
+        self, kind: RegisterKind, device_id: int, address: int, count: int, what: str
+    ) -> Sequence[int]:
+        """Function 4 (``kind`` input) or 3 (holding): the registers the device sent."""
 
     @abc.abstractmethod
     async def _write(self, device_id: int, address: int, values: list[int], what: str) -> None:
@@ -206,13 +206,22 @@ class Transport(abc.ABC):
 
     async def read_input_registers(self, device_id: int, address: int, count: int) -> list[int]:
         """Function 4: ``count`` input registers from ``address`` (values 0..65535)."""
-        return await self._read_registers("input", device_id, address, count)
+        return await self._read_registers(RegisterKind.INPUT, device_id, address, count)
 
     async def read_holding_registers(self, device_id: int, address: int, count: int) -> list[int]:
         """Function 3: ``count`` holding registers from ``address``."""
-        return await self._read_registers("holding", device_id, address, count)
+        return await self._read_registers(RegisterKind.HOLDING, device_id, address, count)
 
-    async def _read_registers(self, kind: str, device_id: int, address: int, count: int) -> list[int]:
+    async def read_registers(
+        self, device_id: int, table: RegisterKind, address: int, count: int
+    ) -> list[int]:
+        """``count`` registers of ``table`` from ``address`` (function 4 or 3); a word that is
+        not a ``RegisterKind`` is a ``ValueError``, never a read of the other table."""
+        return await self._read_registers(RegisterKind(table), device_id, address, count)
+
+    async def _read_registers(
+        self, kind: RegisterKind, device_id: int, address: int, count: int
+    ) -> list[int]:
         if not (1 <= count <= MAX_READ_REGISTERS and address >= 0 and address + count <= 0x10000):
             check_range(address, count, MAX_READ_REGISTERS)
         if not 0 <= device_id <= 247:

@@ -33,8 +33,10 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import assert_never
 
 from ..errors import DecodeError, DeviceConnectionError, DeviceExceptionResponse
+from .register_map import RegisterKind
 from .transport import EXCEPTION_NAMES, Transport
 from .vendor_fc import VendorRead
 
@@ -136,12 +138,21 @@ class VirtualTransport(Transport):
             name = EXCEPTION_NAMES.get(code, "unknown exception")
             raise DeviceExceptionResponse(f"{what}: device answered exception {code} ({name})", code)
 
-    async def _read(self, kind: str, device_id: int, address: int, count: int, what: str) -> Sequence[int]:
+    async def _read(
+        self, kind: RegisterKind, device_id: int, address: int, count: int, what: str
+    ) -> Sequence[int]:
         short = bool(self._faults) and self._faults[0] == "short"
         if short:
             self._faults.popleft()
         self._answer(kind, device_id, address, count, what)
-        image = self.devices[device_id].input if kind == "input" else self.devices[device_id].holding
+        device = self.devices[device_id]
+        match kind:
+            case RegisterKind.INPUT:
+                image = device.input
+            case RegisterKind.HOLDING:
+                image = device.holding
+            case _:
+                assert_never(kind)
         try:
             values = [image[a] for a in range(address, address + count)]
         except KeyError:

@@ -50,7 +50,7 @@ from ..errors import (
     DeviceTimeoutError,
 )
 from ..modbus.backends import open_transport
-from ..modbus.image import RegisterKind
+from ..modbus.image import RegisterSpace
 from ..modbus.plan import MERGE_GAP, ReadRequest, device_plan
 from ..modbus.register_map import MAX_READ_REGISTERS
 from ..modbus.transport import Transport
@@ -189,7 +189,7 @@ class BusWorker:
         """
         t0 = time.monotonic()  # for the duration only (scheduling uses self._mono)
         try:
-            reads: list[tuple[RegisterKind, int, list[int]]] = []
+            reads: list[tuple[RegisterSpace, int, list[int]]] = []
             last = len(runner.plan) - 1
             for k, req in enumerate(runner.plan):
                 try:

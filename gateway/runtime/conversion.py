@@ -7,7 +7,7 @@ import logging
 import time
 from collections.abc import Callable, Iterator, Sequence
 
-from ..modbus.image import RegisterImage, RegisterKind, decode_sample
+from ..modbus.image import RegisterImage, RegisterSpace, decode_sample
 from .processor import DeviceProcessor, DeviceState
 from .snapshot import DeviceSnapshot
 
@@ -33,7 +33,7 @@ class Conversion:
         self,
         processor: DeviceProcessor,
         state: DeviceState,
-        reads: list[tuple[RegisterKind, int, list[int]]],
+        reads: list[tuple[RegisterSpace, int, list[int]]],
         wall_time_s: float,
         host_time_s: float,
         reads_duration_s: float,
@@ -48,7 +48,7 @@ class Conversion:
     def _run(
         processor: DeviceProcessor,
         state: DeviceState,
-        reads: list[tuple[RegisterKind, int, list[int]]],
+        reads: list[tuple[RegisterSpace, int, list[int]]],
         wall_time_s: float,
         host_time_s: float,
         derive: Sequence[Callable[[DeviceSnapshot], object]],

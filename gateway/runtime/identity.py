@@ -37,10 +37,7 @@ async def verify_device(transport: Transport, device: DeviceConfig) -> None:
     """Read the device's checks; ``DeviceMismatchError`` names the first that fails.
     Transport errors (timeouts, exception responses) propagate as they are."""
     for check in device.checks.registers:
-        if check.table == "input":
-            values = await transport.read_input_registers(device.device_id, check.address, 1)
-        else:
-            values = await transport.read_holding_registers(device.device_id, check.address, 1)
+        values = await transport.read_registers(device.device_id, check.table, check.address, 1)
         value = int(values[0])
         if value != check.value:
             raise DeviceMismatchError(

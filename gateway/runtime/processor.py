@@ -43,7 +43,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config import ChannelConfig, DeviceConfig
+from ..config import ChannelConfig, DeviceConfig, Encoding
 from ..errors import DecodeError
 from ..modbus.image import RawSample
 from ..model import ModelState, SensorModel
@@ -175,7 +175,7 @@ class DeviceProcessor:
         # calibrated force or pressure through the identity curve (our drift correction on top
         # when the configuration gives one), a channel with a calibration table through its
         # curve, the others by the physical model, one group per effect set
-        self.output = device.encoding == "output"
+        self.output = device.encoding is Encoding.OUTPUT
         if self.output:
             identity = CurveChannel(LineCurve(1.0, 0.0), device.output_drift or Drift())
             curves = [(k, identity) for k in range(len(chans))]
@@ -217,7 +217,7 @@ class DeviceProcessor:
         # ADC channels without a zero (no baseline, nothing but default parameters): a force
         # read at the converter's idle floor may be the board's offset, and reads NO_ZERO
         self._unzeroed: NDArray[np.bool_] | None = None
-        if device.encoding == "adc":
+        if device.encoding is Encoding.ADC:
             unzeroed = np.array(
                 [c.baseline_ohm is None and c.conversion is None and c.params_source == ("defaults",)
                  for c in chans], dtype=np.bool_,

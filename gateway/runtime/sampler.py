@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 from ..config import BusConfig, DeviceConfig
 from ..modbus.backends import open_transport
-from ..modbus.image import RawSample, RegisterImage, RegisterKind, decode_sample
+from ..modbus.image import RawSample, RegisterImage, RegisterSpace, decode_sample
 from ..modbus.plan import MERGE_GAP, device_plan
 from ..modbus.transport import Transport
 from .identity import prepare_device
@@ -38,7 +38,7 @@ async def sample_device(
         start = time.monotonic()
         next_poll = start
         while True:
-            reads: list[tuple[RegisterKind, int, list[int]]] = []
+            reads: list[tuple[RegisterSpace, int, list[int]]] = []
             for req in plan:
                 reads.append((req.kind, req.address, await transport.read(device.device_id, req)))
             now = time.monotonic()

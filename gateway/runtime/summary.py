@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections import Counter
 
-from ..config import DeviceConfig
+from ..config import DeviceConfig, Encoding
 from ..model import RatioFrontEnd
 from ..model.curves import CurveChannel
 
@@ -39,7 +39,7 @@ def _values(device: DeviceConfig) -> str:
     if frame is not None:
         return f"values: {frame.describe()}"
     regs = device.registers
-    if device.encoding == "adc":
+    if device.encoding is Encoding.ADC:
         return f"values: ADC counts, uint16, {regs.table} registers {regs.adc_address}+{device.n_channels}"
     span = f"{regs.float_address}+{2 * device.n_channels}"
     return f"values: resistance in ohm, float32, {regs.table} registers {span}"
@@ -48,7 +48,7 @@ def _values(device: DeviceConfig) -> str:
 def _tracking(device: DeviceConfig) -> list[str]:
     """One line per way channels are read, with the effects tracked and the clock."""
     chans = device.enabled_channels
-    if device.encoding == "output":
+    if device.encoding is Encoding.OUTPUT:
         drift = device.output_drift
         if drift is None or not drift.active:
             return [
@@ -86,7 +86,7 @@ def _tracking(device: DeviceConfig) -> list[str]:
 
 
 def _sources(device: DeviceConfig) -> str:
-    if device.encoding == "output":
+    if device.encoding is Encoding.OUTPUT:
         return "parameters: none of ours (the device turns its readings into force with its own table)"
     counts: Counter[tuple[str, ...]] = Counter(ch.params_source for ch in device.channels)
     parts = [
@@ -98,15 +98,15 @@ def _sources(device: DeviceConfig) -> str:
 def _assumptions(device: DeviceConfig) -> str:
     """Which forces rest on assumed circuit values, which on a calibration."""
     chans = device.enabled_channels
-    if device.encoding == "output":
+    if device.encoding is Encoding.OUTPUT:
         return "assumes: nothing of the circuit (the device reports force itself)"
     calibrated = sum(1 for ch in chans if "calibration" in ch.params_source)
     rest = len(chans) - calibrated
-    if device.encoding == "adc" and isinstance(device.front_end, RatioFrontEnd):
+    if device.encoding is Encoding.ADC and isinstance(device.front_end, RatioFrontEnd):
         return _ratio_assumptions(device.front_end, calibrated, rest)
     circuit = (
         "the front end's values (reference resistor, full scale)"
-        if device.encoding == "adc"
+        if device.encoding is Encoding.ADC
         else "nothing of the circuit (the device reports ohm)"
     )
     if not rest:

@@ -297,4 +297,4 @@ def test_the_command_calls_read_functions_only() -> None:
         names |= {n.attr for n in ast.walk(tree) if isinstance(n, ast.Attribute)}
         names |= {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
     assert not {n for n in names if n.startswith("write_") or n.startswith("_write")}
-    assert {"read_input_registers", "read_holding_registers", "read_device_identification"} <= names
+    assert {"read_registers", "read_device_identification"} <= names
