@@ -246,7 +246,7 @@ def calibrate(
 
 #: The physical model's fit (8 fits of a stiff model) uses at most this many rows; every
 #: calibration is scored on all the rows the candidates are fitted on.
-PHYSICS_FIT_ROWS = 1500
+PHYSICS_FIT_ROWS = 3000
 
 
 def _every_kth(data: FitData, max_rows: int) -> FitData:

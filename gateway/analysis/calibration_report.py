@@ -126,7 +126,7 @@ def ranking_lines(cal: Calibration) -> list[str]:
     ]
     for s in cal.ranking():
         after, others = s.drift.all_pct_fs
-        mark = "  <- best" if s.name == best else "" if s.name in writable else "  (drifts more than static)"
+        mark = "  <- best" if s.name == best else "" if s.name in writable else "  (holds drift more)"
         out.append(
             f"  {s.name:<30} {s.held_out_force_rms_n:>13.4f} {_pct(after):>12} {_pct(others):>8} "
             f"{s.n_parameters:>10}{mark}"

@@ -62,7 +62,8 @@ def drift_words(cal: Calibration, kind: str) -> str:
 
 #: The first line of a file ``calibration_toml`` writes.
 HEADER = (
-    "Written by `tactile-gateway calibrate` (docs/calibration.md); the gateway reads every table but [meta]."
+    "Written by `tactile-gateway calibrate` (docs/calibration.md); the gateway reads every table, "
+    "and of [meta] the effects."
 )
 
 

@@ -27,7 +27,7 @@ from ..model.tracker import track_series
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-__all__ = ["LINE_ZERO_MARGIN", "Rivals", "force_rms", "line_range_lines", "verdict"]
+__all__ = ["LINE_ZERO_MARGIN", "Rivals", "force_rms", "verdict"]
 
 
 def force_rms(predicted: FloatArray, reference: FloatArray) -> float:
@@ -92,22 +92,6 @@ class Rivals:
         e = sigma_log * dfd
         e = e[np.isfinite(e)]
         return float(np.sqrt(np.mean(e * e))) if e.size else math.nan
-
-
-def line_range_lines(line: LineCurve, record_min_n: float) -> list[str]:
-    """The ``[line]`` table's own ``force_min_n`` when the channel's (the record's lowest
-    force) lies at or below 1.1 x the line's zero-conductance force -n/m (n < 0): below -n/m
-    a sensor at rest would read a force (``gateway.model.calibrated.CurveChannel``)."""
-    if line.intercept_s >= 0.0:
-        return []
-    floor_n = LINE_ZERO_MARGIN * line.force_at_zero_conductance_n
-    if record_min_n > floor_n:
-        return []
-    return [
-        f"# the line reaches zero conductance at {floor_n / LINE_ZERO_MARGIN:.4g} N: it reads from "
-        f"{floor_n:.4g} N (no contact below), not from the record's {record_min_n:.4g} N",
-        f"force_min_n = {floor_n!r}",
-    ]
 
 
 def verdict(

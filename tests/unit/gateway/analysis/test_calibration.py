@@ -123,31 +123,30 @@ def test_a_record_too_short_to_hold_out_is_refused() -> None:
 
 def test_a_line_with_a_negative_intercept_is_written_to_read_from_above_its_zero() -> None:
     """C = m F + n with n = -1e-5 S, m = 2e-5 S/N reaches zero conductance at 0.5 N; a record
-    that starts at 0.3 N would give a channel reading ~0.5 N at rest, which the gateway refuses
-    (``LineConversion``). The [line] table then carries force_min_n = 1.1 x 0.5 N, and loads."""
+    that starts at 0.3 N would give a channel reading ~0.5 N at rest, which the gateway refuses.
+    The [line] table calibrate writes (``line_channel``) then carries force_min_n = 1.1 x 0.5 N,
+    and loads to a channel that reads an open sensor as no contact."""
     import math
-    import tomllib
 
-    from gateway.analysis.rivals import line_range_lines
-    from gateway.model.conversion import ConversionSet, conversion_from_table
+    from gateway.model.calibrated import line_channel
+    from gateway.model.conversion import conversion_from_table
     from gateway.model.static_curves import LineCurve
+    from gateway.model.tracker import track_series
 
     line = LineCurve(2e-5, -1e-5)
-    extra = line_range_lines(line, 0.3)
-    table = tomllib.loads(
-        f"slope_s_per_n = {line.slope_s_per_n!r}\nintercept_s = {line.intercept_s!r}\n" + "\n".join(extra)
-    )
+    written = line_channel(line, 0.3, 8.0)
+    table = written.table()
     assert table["force_min_n"] == pytest.approx(0.55)
     conv = conversion_from_table("line", table, 0.3, 8.0)  # the channel's range is the record's
-    force, status = np.zeros(1), np.zeros(1, dtype=np.int8)
-    ConversionSet([conv]).apply(np.array([math.inf]), force, status)
-    assert force[0] == 0.0 and status[0] == ForceStatus.NO_CONTACT
+    assert conv == written
+    force, _ = track_series(conv, [math.inf, 1e12], [0.0, 1.0])
+    assert force.tolist() == [0.0, 0.0]
     # without the table's own minimum the same line is refused, with the reason
     with pytest.raises(ValueError, match=r"zero conductance at 0\.5 N"):
         conversion_from_table("line", {"slope_s_per_n": 2e-5, "intercept_s": -1e-5}, 0.3, 8.0)
-    # a positive intercept, or a record that starts well above the zero, adds nothing
-    assert line_range_lines(LineCurve(2e-5, 1e-6), 0.05) == []
-    assert line_range_lines(line, 0.6) == []
+    # a positive intercept, or a record that starts well above the zero, keeps the record's start
+    assert line_channel(LineCurve(2e-5, 1e-6), 0.05, 8.0).force_min_n == 0.05
+    assert line_channel(line, 0.6, 8.0).force_min_n == 0.6
 
 
 def test_a_channel_calibrated_on_half_to_five_newtons_reads_beyond_it_flagged_extrapolated(

@@ -59,7 +59,7 @@ def test_the_written_calibration_reads_no_worse_than_line_and_lookup(tmp_path: P
     rms = cal.force_rms()
     assert rms[cal.best] <= min(rms["line"], rms["lookup"])
     # the ranking holds every kind, and drift correction is among the leaders on a creeping sensor
-    names = [row[0] for row in cal.ranking()]
+    names = [row.name for row in cal.ranking()]
     assert {"physics", "line", "lookup", "power_law + static", "lookup + creep"} <= set(names)
     assert "creep" in cal.best or "hysteresis" in cal.best
 

@@ -56,8 +56,8 @@ def _held_out_forces(channel: ChannelRecord, reference_ohm: float) -> dict[str, 
     test = data.test
     rivals = Rivals.fit(data.force_n, data.resistance_ohm, data.train, test)
     out = {c.name: c.force_n[test] for c in rank_candidates(data)}
-    out["line"] = rivals.line.force(data.resistance_ohm[test])
-    out["lookup"] = rivals.lookup.force(data.resistance_ohm[test])
+    out["line"] = rivals.line_force_n[test]
+    out["lookup"] = rivals.lookup_force_n[test]
     return out
 
 
