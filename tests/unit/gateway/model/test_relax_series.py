@@ -190,8 +190,9 @@ def _work(monkeypatch: pytest.MonkeyPatch, log_a: np.ndarray, target: np.ndarray
 def test_fast_creep_over_a_long_series_costs_what_slow_creep_does(
     monkeypatch: pytest.MonkeyPatch, channels: int | None
 ) -> None:
-    # 1e5 rows at tau = 0.05 s decay ~40 e-folds every 100 rows: a chunked scaled sum needs
-    # thousands of chunks; one pass touches each row a fixed number of times whatever tau.
+    # 1e5 rows decay ~40,000 e-folds at tau = 0.05 s and 3.6e6 at 1e-4 s (36 a row, the clamp):
+    # a scaled sum cut every 600 e-folds needs ~70 and ~6,000 chunks; one pass touches each row
+    # a fixed number of times whatever tau.
     dt = _irregular_dt_s(100_000, seed=13)
     shape = (dt.size,) if channels is None else (dt.size, channels)
     log_dt = dt if channels is None else np.repeat(dt[:, None], channels, axis=1)
