@@ -16,9 +16,9 @@ from __future__ import annotations
 import difflib
 from collections.abc import Callable, Iterable, Sequence
 from enum import StrEnum
-from typing import Final
+from typing import Final, TypeVar
 
-__all__ = ["UNKNOWN_KEY", "Choice", "check_keys", "suggest"]
+__all__ = ["UNKNOWN_KEY", "Choice", "check_keys", "choice_of", "suggest"]
 
 #: The message of an unknown key. Fields: ``{key}`` (the key, quoted), ``{hint}`` ("; did you
 #: mean 'x'?" or nothing) and ``{allowed}`` (the allowed keys, comma separated).
@@ -64,3 +64,18 @@ class Choice(StrEnum):
         words = [m.value for m in cls]
         hint = suggest(value, words) if isinstance(value, str) else ""
         raise ValueError(f"{value!r} is not allowed{hint}; allowed: {', '.join(map(repr, words))}")
+
+
+_Word = TypeVar("_Word", bound=Choice)
+
+
+def choice_of(kind: type[_Word], value: object, name: str) -> _Word:
+    """``value`` as a member of ``kind``; otherwise a ``ValueError`` that starts with ``name``
+    (``"kind: 'tpc' is not allowed; did you mean 'tcp'?; allowed: ..."``), a value that is not
+    a string included."""
+    if isinstance(value, str):
+        try:
+            return kind(value)
+        except ValueError as exc:
+            raise ValueError(f"{name}: {exc}") from None
+    raise ValueError(f"{name}: {value!r} is not allowed; allowed: {', '.join(repr(m.value) for m in kind)}")

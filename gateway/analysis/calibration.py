@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..keys import choice_of
 from ..model import EFFECT_PARAMETERS, SensorParams, parse_effects
 from .calibration_range import (
     LIGHT_TOUCH_N,
@@ -51,7 +52,6 @@ from .calibration_result import (
     Objective,
     OffsetMode,
     Score,
-    enum_value,
 )
 from .calibration_writer import HEADER, calibration_file, calibration_toml, write_calibration, written_name
 from .candidates import held_out_drift, rank_candidates
@@ -120,8 +120,8 @@ def calibrate(
     ``"fit"`` fits a reference zero offset, ``"auto"`` fits it and keeps it only if it lowers the
     held-out force RMS, ``"none"`` leaves it out. Held-out force errors of a fit with an offset
     are against F_ref + offset (the same as F_inv - offset against F_ref)."""
-    objective = enum_value(Objective, objective, "objective")
-    force_offset = enum_value(OffsetMode, force_offset, "force_offset")
+    objective = choice_of(Objective, objective, "objective")
+    force_offset = choice_of(OffsetMode, force_offset, "force_offset")
     meta = dict(metadata or {})
     prior = prior or SensorParams()
     notes: list[str] = []

@@ -17,9 +17,9 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from enum import StrEnum
-from typing import Any, TypeVar
+from typing import Any
 
+from ..keys import Choice
 from .calibration_range import model_force_range, widened_range_n
 from .candidates import Candidate
 from .fitting import FitResult
@@ -38,11 +38,10 @@ __all__ = [
     "Objective",
     "OffsetMode",
     "Score",
-    "enum_value",
 ]
 
 
-class CalibrationModel(StrEnum):
+class CalibrationModel(Choice):
     """What a calibration file gives a channel: the physical model, the conductance line, a
     monotone lookup, the best static curve with drift correction, or whichever of them reads
     held-out force best."""
@@ -54,24 +53,12 @@ class CalibrationModel(StrEnum):
     AUTO = "auto"
 
 
-class OffsetMode(StrEnum):
+class OffsetMode(Choice):
     """The reference-force zero offset: fit it and keep it only if it helps, fit it, or none."""
 
     AUTO = "auto"
     FIT = "fit"
     NONE = "none"
-
-
-_Choice = TypeVar("_Choice", bound=StrEnum)
-
-
-def enum_value(kind: type[_Choice], value: str, name: str) -> _Choice:
-    """``value`` as a member of ``kind`` (the one list of what ``name`` may be); ``ValueError``
-    naming ``name`` and every value otherwise."""
-    try:
-        return kind(value)
-    except ValueError:
-        raise ValueError(f"{name} must be one of {', '.join(kind)}, got {value!r}") from None
 
 
 #: an objective by its command-line spelling (``log-r``)

@@ -14,9 +14,10 @@ from typing import Any
 
 from ..atomic import atomic_write_text
 from ..config.calibration_file import CalibrationFile, ChannelCalibration, ConversionTable
+from ..keys import choice_of
 from ..model import parameter_names
 from .calibration_range import model_force_range
-from .calibration_result import OBJECTIVE_WORDS, Calibration, CalibrationModel, enum_value
+from .calibration_result import OBJECTIVE_WORDS, Calibration, CalibrationModel
 
 __all__ = [
     "HEADER",
@@ -77,7 +78,7 @@ def calibration_file(
     ``[channel.<name>]`` table (the physical model's parameters, its force range and the
     calibrated range) and, for a channel whose chosen ``model`` is a rival, its ``[line]``,
     ``[lookup]`` or ``[curve]`` table; ``[meta]`` names the record and the effects."""
-    model = enum_value(CalibrationModel, model, "model")
+    model = choice_of(CalibrationModel, model, "model")
     items = list(calibrations)
     rename = dict(names or {})
     meta_comments = tuple(

@@ -31,11 +31,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from enum import StrEnum
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..keys import Choice
 from ..model import SensorModel, SensorParams
 from .fit_data import FitData
 
@@ -63,7 +63,7 @@ FORCE_F_SCALE_SHARE = 0.05
 SENSITIVITY_FLOOR_SHARE = 0.01
 
 
-class Objective(StrEnum):
+class Objective(Choice):
     """What the physical model's fit minimises: log-resistance residuals, force residuals
     (started from the log-R fit), or both, keeping the one that reads held-out force better."""
 

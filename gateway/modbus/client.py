@@ -37,7 +37,7 @@ import functools
 import logging
 import ssl
 from collections.abc import Awaitable, Callable
-from typing import Any, ClassVar, assert_never
+from typing import Any, ClassVar
 
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient, AsyncModbusTlsClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -415,13 +415,11 @@ class ModbusTransport(Transport):
         pymodbus decodes each register from two bytes, so values are always 0..65535.
         """
         client = self._live_client()
-        match kind:
-            case RegisterKind.INPUT:
-                read = client.read_input_registers
-            case RegisterKind.HOLDING:
-                read = client.read_holding_registers
-            case _:
-                assert_never(kind)
+        # by the member: a word that is not a RegisterKind is a KeyError, not a holding read
+        read = {
+            RegisterKind.INPUT: client.read_input_registers,
+            RegisterKind.HOLDING: client.read_holding_registers,
+        }[kind]
         response = await self._execute(what, read(address, count=count, device_id=device_id))
         if response.function_code != kind.read_function:
             raise DecodeError(f"{what}: answer has function {response.function_code}")

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Final, Protocol, TypeVar
 
 from ..errors import ConfigError
-from ..keys import Choice
+from ..keys import Choice, choice_of
 from .vendor_fc import VendorRead
 
 __all__ = [
@@ -114,14 +114,11 @@ _Word = TypeVar("_Word", bound=Choice)
 
 def config_word(kind: type[_Word], where: str, name: str, value: object) -> _Word:
     """``value`` as a member of ``kind``; ``ConfigError`` naming ``where``, ``name``, the
-    closest and every allowed word otherwise."""
-    if isinstance(value, str):
-        try:
-            return kind(value)
-        except ValueError as exc:
-            raise ConfigError(f"{where}: {name}: {exc}") from None
-    allowed = ", ".join(repr(m.value) for m in kind)
-    raise ConfigError(f"{where}: {name}: {value!r} is not allowed; allowed: {allowed}")
+    closest and every allowed word otherwise (``keys.choice_of``)."""
+    try:
+        return choice_of(kind, value, f"{where}: {name}")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 ENCODINGS: Final = tuple(Encoding)

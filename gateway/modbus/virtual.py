@@ -33,7 +33,6 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import assert_never
 
 from ..errors import DecodeError, DeviceConnectionError, DeviceExceptionResponse
 from .register_map import RegisterKind
@@ -138,21 +137,20 @@ class VirtualTransport(Transport):
             name = EXCEPTION_NAMES.get(code, "unknown exception")
             raise DeviceExceptionResponse(f"{what}: device answered exception {code} ({name})", code)
 
-    async def _read(
-        self, kind: RegisterKind, device_id: int, address: int, count: int, what: str
-    ) -> Sequence[int]:
+    def _short_answer(self) -> bool:
+        """Whether the next answer is scripted to be one word short (the fault is used up)."""
         short = bool(self._faults) and self._faults[0] == "short"
         if short:
             self._faults.popleft()
+        return short
+
+    async def _read(
+        self, kind: RegisterKind, device_id: int, address: int, count: int, what: str
+    ) -> Sequence[int]:
+        short = self._short_answer()
         self._answer(kind, device_id, address, count, what)
         device = self.devices[device_id]
-        match kind:
-            case RegisterKind.INPUT:
-                image = device.input
-            case RegisterKind.HOLDING:
-                image = device.holding
-            case _:
-                assert_never(kind)
+        image = {RegisterKind.INPUT: device.input, RegisterKind.HOLDING: device.holding}[kind]
         try:
             values = [image[a] for a in range(address, address + count)]
         except KeyError:
@@ -174,9 +172,7 @@ class VirtualTransport(Transport):
     async def _read_vendor(
         self, read: VendorRead, device_id: int, address: int, count: int, what: str
     ) -> Sequence[int]:
-        short = bool(self._faults) and self._faults[0] == "short"
-        if short:
-            self._faults.popleft()
+        short = self._short_answer()
         self._answer(f"vendor 0x{read.function_code:02X}", device_id, address, count, what)
         handler = self.devices[device_id].vendor.get(read.function_code)
         if handler is None:

@@ -9,10 +9,11 @@ import click
 import pytest
 
 from gateway.analysis import calibration, calibration_result
-from gateway.analysis.calibration_result import CalibrationModel, OffsetMode, enum_value
+from gateway.analysis.calibration_result import CalibrationModel, OffsetMode
 from gateway.analysis.calibration_writer import calibration_file
 from gateway.analysis.objectives import FIT_OBJECTIVES, Objective, check_objective
 from gateway.cli.calibrate_cmd import calibrate_cmd
+from gateway.keys import choice_of
 
 
 def _choices(name: str) -> list[str]:
@@ -46,20 +47,32 @@ def test_a_fit_objective_is_an_enum_member_and_auto_is_not_one() -> None:
 @pytest.mark.parametrize(
     ("kind", "value", "message"),
     [
-        (Objective, "logr", "objective must be one of auto, log_r, force, got 'logr'"),
-        (OffsetMode, "yes", "objective must be one of auto, fit, none, got 'yes'"),
-        (CalibrationModel, "phys", "objective must be one of physics, line, lookup, curve, auto, got 'phys'"),
+        (
+            Objective,
+            "logr",
+            "objective: 'logr' is not allowed; did you mean 'log_r'?; allowed: 'auto', 'log_r', 'force'",
+        ),
+        (OffsetMode, "yes", "objective: 'yes' is not allowed; allowed: 'auto', 'fit', 'none'"),
+        (OffsetMode, 1, "objective: 1 is not allowed; allowed: 'auto', 'fit', 'none'"),
+        (
+            CalibrationModel,
+            "phys",
+            "objective: 'phys' is not allowed; did you mean 'physics'?; allowed: 'physics', 'line', "
+            "'lookup', 'curve', 'auto'",
+        ),
     ],
 )
-def test_a_misspelt_value_names_every_allowed_one(kind: Any, value: str, message: str) -> None:
+def test_a_misspelt_value_names_the_closest_and_every_allowed_one(
+    kind: Any, value: object, message: str
+) -> None:
     with pytest.raises(ValueError) as exc:
-        enum_value(kind, value, "objective")
+        choice_of(kind, value, "objective")
     assert str(exc.value) == message
     first = next(iter(kind))
-    assert enum_value(kind, first.value, "objective") is first
+    assert choice_of(kind, first.value, "objective") is first
+    assert repr(first) == repr(first.value)
 
 
 def test_the_writer_refuses_a_misspelt_model() -> None:
-    allowed = "physics, line, lookup, curve, auto"
-    with pytest.raises(ValueError, match=f"model must be one of {allowed}, got 'phys'"):
+    with pytest.raises(ValueError, match=r"model: 'phys' is not allowed; did you mean 'physics'\?"):
         calibration_file([], "phys")
