@@ -167,12 +167,20 @@ def calibrate(
     physics_data = _every_kth(data, PHYSICS_FIT_ROWS)
     if physics_data is not data:
         notes.append(
-            f"the physical model fitted on every {math.ceil(data.time_s.size / PHYSICS_FIT_ROWS)}th of "
-            f"those rows ({physics_data.time_s.size}); it is scored on all of them, as the gateway reads it"
+            f"the physical model fitted on every {math.ceil(data.time_s.size / PHYSICS_FIT_ROWS)}th of those "
+            f"rows ({physics_data.time_s.size}); it is scored on all of them, as the gateway reads it"
         )
     runs = [_fit_objective(physics_data, chosen, ranged, "log_r", force_offset, try_h, None)]
     if objective != Objective.LOG_R:
-        runs.append(_fit_objective(physics_data, chosen, ranged, "force", force_offset, try_h, runs[0]))
+        lookup_n = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test).lookup_force_rms_n
+        log_r_n = runs[0].fit.gap_test.force_rms_n
+        if objective == Objective.FORCE or not log_r_n > CONTENTION_FACTOR * lookup_n:
+            runs.append(_fit_objective(physics_data, chosen, ranged, "force", force_offset, try_h, runs[0]))
+        else:
+            notes.append(
+                f"force objective not tried: the log-R fit reads held-out force at {log_r_n:.4g} N, more "
+                f"than {CONTENTION_FACTOR:g} x the monotone lookup's {lookup_n:.4g} N (out of contention)"
+            )
     for run in runs:
         notes += run.notes
     pick = runs[-1] if objective == Objective.FORCE else min(runs, key=lambda r: _rms(r.fit))
@@ -244,11 +252,13 @@ def calibrate(
     return replace(cal, scores=(physics_score, *cal.scores))
 
 
-#: The physical model's fit (8 fits of a stiff model) uses at most this many rows; every
+#: The physical model's fit (up to 8 fits of a stiff model) uses at most this many rows; every
 #: calibration is scored on all the rows the candidates are fitted on.
 PHYSICS_FIT_ROWS = 3000
-
-
+#: ``objective="auto"`` tries the force objective (5 more fits) only while the log-R fit reads
+#: held-out force within this factor of the monotone lookup's: beyond it the physical model is
+#: out of contention on the record, and its second objective would cost minutes for nothing.
+CONTENTION_FACTOR = 1.5
 def _every_kth(data: FitData, max_rows: int) -> FitData:
     """``data`` itself, or every k-th row of it so that at most ``max_rows`` remain."""
     n = data.time_s.size

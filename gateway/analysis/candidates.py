@@ -64,8 +64,8 @@ from .holds import DriftGroups, Hold, drift_groups_pct, find_holds, hold_drifts,
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-TAU1_GRID_S = (0.3, 1.0, 3.0, 10.0, 30.0)
-TAU2_GRID_S = (30.0, 100.0, 300.0, 1000.0)
+TAU1_GRID_S = (0.3, 1.0, 2.0, 5.0, 10.0, 20.0)
+TAU2_GRID_S = (30.0, 60.0, 120.0, 300.0, 1000.0)
 #: The recovery time constant as a multiple of the loading one (1: symmetric).
 RECOVERY_FACTORS = (1.0, 3.0, 10.0)
 WIDTH_GRID_FS = (0.02, 0.05, 0.1, 0.2)  # play width as a share of the record's full scale

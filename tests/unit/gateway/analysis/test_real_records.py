@@ -65,7 +65,7 @@ def test_every_real_calibration_reports_model_and_line_on_the_same_held_out_rows
         assert c.fit.n_test > 40
         d = c.as_dict()
         assert d["held_out_force_rms_n"]["line"] == c.rivals.line_force_rms_n
-        assert d["verdict"] and d["best"] == d["ranking"][0]["name"]
+        assert d["verdict"] and d["best"] == next(row["name"] for row in d["ranking"] if row["writable"])
         # what auto writes never reads held-out force worse than the line or the lookup
         assert rms[c.best] <= min(rms["line"], rms["lookup"])
         assert not d["noise"]["estimated"] and 0 < d["noise"]["floor_log_resistance"] < 0.3
@@ -92,9 +92,15 @@ def test_measured_numbers_on_the_real_files() -> None:
         # what auto writes reads held-out force at least as well as the line and the lookup
         rms = c.force_rms()
         assert rms[c.best] <= min(rms["line"], rms["lookup"]), c.record
-    # thinsil: a conductance line with hysteresis on top reads it best (0.128 N against the
-    # physical model's 0.135 N and the plain line's 0.1356 N)
-    assert thinsil.best == "line + hysteresis" and nosil.best == "physics"
+    # thinsil: a conductance line with hysteresis on top reads it best (0.1313 N against the
+    # physical model's 0.1438 N read as the gateway reads it, and the plain line's 0.1352 N)
+    assert thinsil.best == "line + hysteresis"
+    # nosil: the physical model's holds drift more than the lookup's (1.87 against 0.88 % FS after
+    # a higher load), so it is not written; a power law with hysteresis is (0.1700 N)
+    assert nosil.best == "power_law + hysteresis"
+    physics = nosil.score("physics")
+    assert physics is not None and "physics" not in {s.name for s in nosil.writable()}
+    assert physics.drift.after_higher_pct_fs > nosil.static_drift_reference()[0] + 0.5
     # nosil: the log-R fit with hysteresis (which makes the force error smaller) is kept
     assert nosil.fit.objective == "log_r" and "hysteresis" in nosil.fit.effects
     assert nosil.fit_before is not None
@@ -105,7 +111,9 @@ def test_measured_numbers_on_the_real_files() -> None:
     assert thinsil.other.gap_test.force_rms_n > 1.1 * thinsil.rivals.line_force_rms_n
     # thick: the 26 N record no longer reads 10 N at most; the model beats the line by far
     assert thick.fit.objective == "force"
-    assert thick.fit.gap_test.force_rms_n < 0.65 * thick.rivals.line_force_rms_n
+    # (1.2336 N against 1.8398 N: the line read as the gateway reads it, a negative force as no
+    # contact at 0 N; read raw, with its negative forces, it scored 2.081 N before)
+    assert thick.fit.gap_test.force_rms_n < 0.7 * thick.rivals.line_force_rms_n
     assert any("above the configured force_max_n = 10 N" in w for w in thick.warnings)
     assert thick.rows_outside_configured > 10
     # its fitted zero offset is the one the file's header describes (an unloaded cell reads ~0.49 N):
