@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .fitting import FitData, FitResult
-from .holds import MIN_HOLD_S, find_holds
+from .holds import MIN_HOLD_S, find_holds, hold_tolerance_n
 
 FloatArray = NDArray[np.float64]
 #: Readings above this are open circuits for the zero-force consistency check.
@@ -323,8 +323,9 @@ def residual_structure(
     """The final model's residuals, log-R and force (inverted with the tracked state minus the
     offset-corrected reference), on every usable row (fitted and held-out), binned against
     force level, time in hold, loading direction, loading rate (real time), temperature (when
-    the record has it), measurement run (when its metadata lists the run starts, ``# runs:``)
-    and position in the record; per bin the mean and RMS of both."""
+    the record has it), load history (what came before each hold), measurement run (when its
+    metadata lists the run starts, ``# runs:``) and position in the record; per bin the mean
+    and RMS of both."""
     res = fit.log_residual
     if res.size != data.force_n.size:
         return ResidualStructure((), ("the fit has no per-row residuals",), 0)
@@ -369,6 +370,10 @@ def residual_structure(
         axis("time_in_hold", "time in hold", bins)
     else:
         skipped.append("time in hold and loading rate: the record has no real time")
+    if segments:
+        axis("load_history", "load history (the load before a hold)", _history_bins(f, segments))
+    else:
+        skipped.append("load history: the record has no hold of its reference force")
     # loading direction
     d = _direction(f, held)
     axis(
@@ -436,6 +441,34 @@ def residual_structure(
             fifths.append((f"in the {name} fifth of the record ({when})", cut == i))
         axis("elapsed", "time since the record's start", fifths)
     return ResidualStructure(tuple(axes), tuple(skipped), n)
+
+
+def _history_bins(
+    force_n: FloatArray, segments: list[tuple[int, int]]
+) -> list[tuple[str, NDArray[np.bool_]]]:
+    """The rows of every hold by what came before it: right after a higher load (the reference
+    rose more than twice the hold tolerance above the hold's level since the previous hold
+    began, as ``holds.hold_drifts`` groups them), after a lower load or rest, or at the
+    record's very start (what came before is not in the record)."""
+    tol = hold_tolerance_n(force_n)
+    higher = np.zeros(force_n.size, dtype=bool)
+    lower = np.zeros(force_n.size, dtype=bool)
+    start = np.zeros(force_n.size, dtype=bool)
+    previous = 0
+    for a, b in segments:
+        before = force_n[previous:a]
+        if a == 0:
+            start[a:b] = True
+        elif float(np.max(before)) > float(np.mean(force_n[a:b])) + 2.0 * tol:
+            higher[a:b] = True
+        else:
+            lower[a:b] = True
+        previous = a
+    return [
+        ("in the hold the record starts in (what came before is unknown)", start),
+        ("in a hold right after a higher load", higher),
+        ("in a hold after a lower load or rest", lower),
+    ]
 
 
 def _bin(label: str, m: NDArray[np.bool_], res: FloatArray, fres: FloatArray) -> ResidualBin:

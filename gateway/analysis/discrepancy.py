@@ -1,6 +1,16 @@
 """The discrepancy workflow: where model and measurement disagree, which effect is missing.
 
-Starting from a baseline model (by default ``tunneling``, the model the paper improves on):
+Starting from the sensor's best static form (``discrepancy_static.choose_static``, the default,
+``baseline=None``): the paper's physics in its best static form (``tunneling`` and the
+static-shape effects ``contact``, ``series_resistance``, ``leakage`` that steps 1-4 add) and
+every static curve of ``calibrate``'s ranking (power law, line, lookup) compete on the tracked
+held-out force, and the best one is the baseline. On the physics the workflow goes on with the
+remaining effects as below; on a curve it adds the dynamic effects missing on top of it
+(``discrepancy_static.curve_steps``: creep, creep2, hysteresis, on the tracked held-out force).
+A baseline of effects (``baseline=("tunneling",)``, the model the paper improves on) starts
+from the physics as given, and a curve kind (``baseline=("power_law",)``) from that curve.
+
+On the physics:
 
 1. fit the current model to the record (``fitting.fit_channel``);
 2. describe where it disagrees: log-resistance residuals by force level, by time since the
@@ -13,13 +23,14 @@ Starting from a baseline model (by default ``tunneling``, the model the paper im
    tracked state (the drift-corrected inversion the runtime runs) is worse than the current
    model's; say so when two candidates cannot be told apart, with the measurement that would
    separate them; repeat until none helps;
-5. when the final model's held-out gap is still well above the noise (log-R RMS above
-   ``UNEXPLAINED_FLOOR_RATIO`` x the noise floor) or it reads force worse than the best static
-   rival (the line or the lookup, by more than the verdict's 2 % tie), say that an unexplained
-   residual remains, show its structure (``diagnostics.residual_structure``) and name the best
-   empirical alternative (the line, the lookup, and whatever ``alternatives`` adds).
+5. say whether an unexplained residual remains (``discrepancy_residual.assess_residual``: the
+   held-out gap well above the noise, a reading worse than the best static rival, or a clear
+   trend with the time since the record's start or with the load history at any level), show
+   its structure (``diagnostics.residual_structure``) and name the best empirical alternative.
 
-The JSON summary keeps the keys and meanings of ``docs/record-format.md``.
+Every verdict compares with the best static rival (the line, the lookup, any static curve of
+the ranking: ``rivals.verdict``). The JSON summary keeps the keys and meanings of
+``docs/record-format.md``.
 """
 
 from __future__ import annotations
@@ -33,124 +44,55 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..model import EFFECT_NAMES, SensorParams, parse_effects
-from .candidates import rank_candidates
-from .diagnostics import Finding, ResidualStructure, describe_gaps, residual_structure
-from .discrepancy_choice import CandidateScore, refusal
+from .candidates import Candidate, rank_candidates
+from .diagnostics import describe_gaps
+from .discrepancy_choice import CandidateScore, Step, refusal
 from .discrepancy_choice import decide as _decide
 from .discrepancy_choice import penalized as _penalized
+from .discrepancy_residual import (
+    UNEXPLAINED_FLOOR_RATIO,
+    UNEXPLAINED_RIVAL_TIE,
+    UnexplainedResidual,
+    assess_residual,
+)
+from .discrepancy_static import (
+    CURVE_EFFECTS,
+    CURVE_KINDS,
+    PHYSICS,
+    STATIC_EFFECTS,
+    StaticChoice,
+    choose_static,
+    curve_label,
+    curve_steps,
+    static_curves,
+)
 from .fitting import FitData, FitResult, Gap, fit_channel, parameters_for
+from .load_history import StartLoad, channel_start_load
 from .measurement import noise_model, time_is_real
 from .records import ChannelRecord
-from .rivals import Rivals
+from .rivals import Rivals, verdict
+
+__all__ = [
+    "UNEXPLAINED_FLOOR_RATIO",
+    "UNEXPLAINED_RIVAL_TIE",
+    "CandidateScore",
+    "DiscrepancyReport",
+    "Step",
+    "UnexplainedResidual",
+    "decimate",
+    "default_candidates",
+    "parse_baseline",
+    "prepare",
+    "run_discrepancy",
+]
 
 FloatArray = NDArray[np.float64]
 
 TIME_EFFECTS = ("creep", "creep2")
 MAX_FIT_ROWS = 6000
-#: An unexplained residual remains when the final held-out log-R RMS exceeds this multiple of
-#: the noise floor the measurement model predicts ...
-UNEXPLAINED_FLOOR_RATIO = 2.0
-#: ... or the final model reads held-out force worse than the best static rival (line or lookup)
-#: by more than this share (the tie of ``rivals.verdict``).
-UNEXPLAINED_RIVAL_TIE = 0.02
-
 #: Further empirical models for the unexplained-residual verdict: given the fit data, each
 #: (name, held-out force RMS in N on ``data.test``); the line and the lookup are always there.
 Alternatives = Callable[[FitData], list[tuple[str, float]]]
-
-
-@dataclass(frozen=True)
-class Step:
-    """One round of the workflow."""
-
-    effects_before: tuple[str, ...]
-    fit_before: FitResult
-    findings: tuple[Finding, ...]
-    candidates: tuple[CandidateScore, ...]
-    added: str | None
-    evidence: str
-    ambiguous_with: str | None = None
-
-    @property
-    def tracked_before(self) -> float:
-        """The held-out force RMS of the model before this step, read with the tracked state."""
-        return self.fit_before.gap_test.force_rms_n
-
-    @property
-    def tracked_after(self) -> float:
-        """The same after this step (the added candidate's; the model's own when nothing was added)."""
-        return _chosen(self).gap_test.force_rms_n
-
-    def refused(self) -> list[tuple[CandidateScore, str]]:
-        """The candidates the tracked-force rule refused at this step, with the reason."""
-        now = self.tracked_before
-        return [(c, why) for c in self.candidates if (why := refusal(c, now)) is not None]
-
-
-@dataclass(frozen=True)
-class UnexplainedResidual:
-    """What the final model leaves: whether a residual remains that no catalogued effect
-    explains, the numbers that say so, its structure and the best empirical alternative."""
-
-    remains: bool
-    log_r_rms: float
-    floor_log: float
-    force_rms_n: float
-    best_static: tuple[str, float] | None
-    alternatives: tuple[tuple[str, float], ...]
-    reasons: tuple[str, ...]
-    structure: ResidualStructure
-    #: the effects the workflow added before this verdict
-    added: tuple[str, ...] = ()
-
-    @property
-    def floor_ratio(self) -> float:
-        ok = math.isfinite(self.log_r_rms) and math.isfinite(self.floor_log) and self.floor_log > 0
-        return self.log_r_rms / self.floor_log if ok else math.nan
-
-    @property
-    def best_alternative(self) -> tuple[str, float] | None:
-        finite = [a for a in self.alternatives if math.isfinite(a[1])]
-        return min(finite, key=lambda a: a[1]) if finite else None
-
-    def sentence(self) -> str:
-        """The verdict in words (one paragraph)."""
-        if not self.remains:
-            return "no unexplained residual: " + "; ".join(self.reasons)
-        reasons = "; ".join(self.reasons)
-        words = f"AN UNEXPLAINED RESIDUAL REMAINS: no catalogued effect closes the gap ({reasons})"
-        if self.added:
-            names = " and ".join(self.added)
-            words += (
-                f"; what was added ({names}: each read the tracked held-out force better) does not close it"
-            )
-        words += f"; {self.structure.sentence()}"
-        best = self.best_alternative
-        if best is not None:
-            words += f"; best empirical alternative on held-out force: {best[0]} ({best[1]:.4g} N"
-            words += f", the model {self.force_rms_n:.4g} N)"
-        return words
-
-    def as_json(self) -> dict[str, Any]:
-        best = self.best_alternative
-        static = self.best_static
-        return {
-            "remains": self.remains,
-            "reasons": list(self.reasons),
-            "after_adding": list(self.added),
-            "log_resistance_rms": _num(self.log_r_rms),
-            "noise_floor_log_resistance": _num(self.floor_log),
-            "floor_ratio": _num(self.floor_ratio),
-            "floor_ratio_limit": UNEXPLAINED_FLOOR_RATIO,
-            "force_rms_n": _num(self.force_rms_n),
-            "best_static_rival": None
-            if static is None
-            else {"name": static[0], "force_rms_n": _num(static[1])},
-            "best_alternative": None if best is None else {"name": best[0], "force_rms_n": _num(best[1])},
-            "alternatives": [{"name": n, "force_rms_n": _num(v)} for n, v in self.alternatives],
-            "structure": self.structure.as_json(),
-            "sentence": self.sentence(),
-        }
 
 
 def _num(x: float) -> float | None:
@@ -172,19 +114,25 @@ class DiscrepancyReport:
     noise_floor_log: float = math.nan
     noise_description: str = ""
     unexplained: UnexplainedResidual | None = None
+    #: the static forms on held-out force and the one the workflow started from (None: the
+    #: baseline was given)
+    static_choice: StaticChoice | None = None
+    #: how the record starts (loaded or at rest)
+    start: StartLoad | None = None
+    #: every static rival on held-out force (N): the line, the lookup, the ranking's static curves
+    static_rivals: tuple[tuple[str, float], ...] = ()
+    #: the final model in words: the physical model, or a curve with its effects
+    model_name: str = "the physical model"
 
     def rival_summary(self) -> str:
-        """The final model beside the line and the lookup on the same held-out rows, in words."""
-        if self.rivals is None:
-            return "no conductance line could be fitted"
-        from .rivals import verdict
-
+        """The final model beside every static rival on the same held-out rows, and the verdict
+        against the best of them (``rivals.verdict``), in words."""
+        if not self.static_rivals:
+            return "no static rival could be fitted"
         model = self.final_fit.gap_test.force_rms_n
-        line, lookup = self.rivals.line_force_rms_n, self.rivals.lookup_force_rms_n
-        return (
-            f"held-out force RMS: model {model:.4g} N, conductance line {line:.4g} N, "
-            f"monotone lookup {lookup:.4g} N; {verdict(model, line)}"
-        )
+        figures = ", ".join(f"{name} {v:.4g} N" for name, v in self.static_rivals)
+        words = verdict(model, dict(self.static_rivals), model_name=self.model_name)
+        return f"held-out force RMS: {self.model_name} {model:.4g} N, {figures}; {words}"
 
     @property
     def added(self) -> list[str]:
@@ -203,8 +151,9 @@ class DiscrepancyReport:
             "steps": [
                 {
                     "added": s.added,
+                    "model_label": s.label,
                     "evidence": s.evidence,
-                    "gap": _gap_json(_chosen(s).gap_test),
+                    "gap": _gap_json(s.chosen.gap_test),
                     "tracked_force_rms_n": {"before": _num(s.tracked_before), "after": _num(s.tracked_after)},
                     "candidates": [
                         {
@@ -225,6 +174,7 @@ class DiscrepancyReport:
                 {
                     "step": i,
                     "model": list(s.effects_before),
+                    "model_label": s.label,
                     "effect": c.effect,
                     "tracked_force_rms_n": {
                         "before": _num(s.tracked_before),
@@ -240,25 +190,22 @@ class DiscrepancyReport:
             "candidates": list(self.candidates),
             "notes": list(self.notes),
             "rivals": None
-            if self.rivals is None
+            if not self.static_rivals
             else {
-                "line_force_rms_n": self.rivals.line_force_rms_n,
-                "lookup_force_rms_n": self.rivals.lookup_force_rms_n,
+                "line_force_rms_n": None if self.rivals is None else _num(self.rivals.line_force_rms_n),
+                "lookup_force_rms_n": None if self.rivals is None else _num(self.rivals.lookup_force_rms_n),
                 "model_force_rms_n": self.final_fit.gap_test.force_rms_n,
                 "verdict": self.rival_summary(),
+                "static": [{"name": n, "force_rms_n": _num(v)} for n, v in self.static_rivals],
             },
             "noise": {"floor_log_resistance": self.noise_floor_log, "description": self.noise_description},
+            "static_form": None if self.static_choice is None else self.static_choice.as_json(),
+            "final_model": self.model_name,
+            "start_load": None if self.start is None else self.start.as_json(),
             "ambiguous": [
                 {"added": s.added, "runner_up": s.ambiguous_with} for s in self.steps if s.ambiguous_with
             ],
         }
-
-
-def _chosen(step: Step) -> FitResult:
-    for c in step.candidates:
-        if c.effect == step.added:
-            return c.fit
-    return step.fit_before
 
 
 def _gap_json(gap: Gap) -> dict[str, float | None]:
@@ -316,9 +263,32 @@ def default_candidates(
     return tuple(out), notes
 
 
+def parse_baseline(baseline: Iterable[str] | None) -> tuple[str, tuple[str, ...]]:
+    """Where the workflow starts: ``("auto", ())`` for None or ``auto`` (the best static form),
+    ``(kind, ())`` for one static curve kind, ``("physics", effects)`` for effect names."""
+    if baseline is None:
+        return "auto", ()
+    tokens = [t.strip() for t in ([baseline] if isinstance(baseline, str) else baseline)]
+    tokens = [t for part in tokens for t in part.split(",") if t.strip()]
+    tokens = [t.strip() for t in tokens]
+    if tokens == ["auto"]:
+        return "auto", ()
+    kinds = [t for t in tokens if t in CURVE_KINDS]
+    if kinds:
+        if len(tokens) != 1:
+            raise ValueError(
+                f"a static curve baseline is one curve kind alone ({', '.join(CURVE_KINDS)}), not "
+                f"{', '.join(tokens)}: the dynamic effects on top of it are what the workflow looks for"
+            )
+        return kinds[0], ()
+    if "auto" in tokens:
+        raise ValueError("'auto' is a baseline alone: the best static form on held-out force")
+    return PHYSICS, parse_effects(tokens)
+
+
 def run_discrepancy(
     channel: ChannelRecord,
-    baseline: Iterable[str] = ("tunneling",),
+    baseline: Iterable[str] | None = None,
     candidates: Iterable[str] | None = None,
     prior: SensorParams | None = None,
     record_name: str = "",
@@ -326,7 +296,7 @@ def run_discrepancy(
     metadata: Mapping[str, str] | None = None,
     alternatives: Alternatives | None = None,
 ) -> DiscrepancyReport:
-    """Run the workflow on one channel (see the module docstring).
+    """Run the workflow on one channel (see the module docstring; ``baseline``: ``parse_baseline``).
 
     ``alternatives`` plugs further empirical models into the unexplained-residual verdict: it
     gets the fit data and returns (name, held-out force RMS on ``data.test``) pairs. By default
@@ -335,46 +305,127 @@ def run_discrepancy(
     """
     meta = dict(metadata or {})
     real_time = time_is_real(meta)
-    if alternatives is None:
-
-        def alternatives(data: FitData) -> list[tuple[str, float]]:
-            return [(c.name, c.held_out_force_rms_n) for c in rank_candidates(data, real_time=real_time)]
-
-    base = parse_effects(baseline)
+    start_kind, base = parse_baseline(baseline)
     notes: list[str] = []
-    if candidates is None:
-        pool, why = default_candidates(channel, base, real_time)
-        notes.extend(why)
-    else:
-        pool = tuple(e for e in parse_effects(candidates) if e != "tunneling" and e not in base)
-        if not real_time and any(e in TIME_EFFECTS for e in pool):
-            notes.append("creep/creep2 not candidates: the record has no real time")
-            pool = tuple(e for e in pool if e not in TIME_EFFECTS)
     zero_noise = channel.zero_noise_note()
     if zero_noise is not None:
         notes.append(zero_noise)
+    pool, why = default_candidates(channel, base or ("tunneling",), real_time)
+    if candidates is not None:
+        pool = tuple(e for e in parse_effects(candidates) if e != "tunneling" and e not in base)
+        why = []
+        if not real_time and any(e in TIME_EFFECTS for e in pool):
+            why.append("creep/creep2 not candidates: the record has no real time")
+            pool = tuple(e for e in pool if e not in TIME_EFFECTS)
+    notes.extend(why)
     small = decimate(channel)
     if small.n_samples < channel.n_samples:
         notes.append(f"fitted on every {channel.n_samples // small.n_samples}th row ({small.n_samples} rows)")
     data, prior, extra = prepare(small, meta, prior)
     notes.extend(extra)
-    current = base
+    start = channel_start_load(channel) if channel.n_samples else None
     try:
         rivals: Rivals | None = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test)
     except ValueError:
         rivals = None
     force_floor = _force_floor(data, rivals)
-    fit = fit_channel(data, current, prior)
+    ranking: list[Candidate] = []
+    if start_kind != PHYSICS or alternatives is None:
+        ranking = rank_candidates(data, real_time=real_time)
+    statics: list[tuple[str, float]] = []
+    if rivals is not None:
+        statics += [
+            ("conductance line", rivals.line_force_rms_n),
+            ("monotone lookup", rivals.lookup_force_rms_n),
+        ]
+    further = list(alternatives(data)) if alternatives is not None else []
+    further += [(c.name, c.held_out_force_rms_n) for c in ranking] if alternatives is None else []
+    statics += [(c.name, c.held_out_force_rms_n) for c in static_curves(ranking).values()]
+    statics += [a for a in further if a[0].endswith(" + static") and a[0] not in dict(statics)]
+    further = [a for a in further if a[0] not in dict(statics)]
+
+    choice: StaticChoice | None = None
+    kind = start_kind
+    if start_kind == "auto":
+        static_pool = tuple(e for e in pool if e in STATIC_EFFECTS)
+        first, physics_fit = _physics_steps(data, ("tunneling",), static_pool, prior, force_floor, max_steps)
+        choice = choose_static(physics_fit, ranking)
+        kind = choice.chosen
+        if kind == PHYSICS:
+            if first and first[-1].added is None:
+                first = first[:-1]
+            rest = tuple(e for e in pool if e not in physics_fit.effects)
+            more, fit = _physics_steps(
+                data,
+                physics_fit.effects,
+                rest,
+                prior,
+                force_floor,
+                max_steps,
+                candidates is None,
+                physics_fit,
+            )
+            steps, base = first + more, ("tunneling",)
+        else:
+            notes.append(
+                f"{', '.join(static_pool) or 'the static-shape effects'} not candidates: they bend the "
+                f"physics' static curve, and the {kind} reads the sensor's static curve better "
+                f"({choice.sentence()})"
+            )
+    elif start_kind == PHYSICS:
+        steps, fit = _physics_steps(data, base, pool, prior, force_floor, max_steps, candidates is None)
+    if kind != PHYSICS:
+        dynamic = tuple(e for e in pool if e in CURVE_EFFECTS) if candidates is not None else CURVE_EFFECTS
+        dynamic = tuple(e for e in dynamic if real_time or e not in TIME_EFFECTS)
+        if "temperature" in pool:
+            notes.append(
+                "temperature is not a candidate on a static curve (no curve form carries it): the "
+                "residual's structure shows it"
+            )
+        steps, fit, kind = curve_steps(data, kind, ranking, dynamic, max_steps)
+        base, pool = (), dynamic
+    floor = _floor(data)
+    unexplained = assess_residual(data, fit, floor, statics, further, real_time, meta, start)
+    unexplained = replace(unexplained, added=tuple(s.added for s in steps if s.added))
+    label = "the physical model" if kind == PHYSICS else curve_label(kind, fit.effects)
+    return DiscrepancyReport(
+        record=record_name,
+        channel=channel.name,
+        baseline=base,
+        candidates=pool,
+        steps=tuple(steps),
+        final_fit=fit,
+        notes=tuple(notes),
+        rivals=rivals,
+        noise_floor_log=floor,
+        noise_description=extra_description(small, meta),
+        unexplained=unexplained,
+        static_choice=choice,
+        start=start,
+        static_rivals=tuple(statics),
+        model_name=label,
+    )
+
+
+def _physics_steps(
+    data: FitData,
+    start: tuple[str, ...],
+    pool: Sequence[str],
+    prior: SensorParams | None,
+    force_floor: float,
+    max_steps: int,
+    creep2_follows: bool = False,
+    fit: FitResult | None = None,
+) -> tuple[list[Step], FitResult]:
+    """Steps 1-4 of the module docstring from the physics ``start`` (fitted: ``fit``) with the
+    candidates ``pool``; ``creep2_follows``: creep2 becomes a candidate once creep is added."""
+    current = start
+    fit = fit if fit is not None else fit_channel(data, current, prior)
     steps: list[Step] = []
     remaining = list(pool)
     for _ in range(max_steps):
         findings = describe_gaps(data, fit)
-        scored = tuple(
-            sorted(
-                (_score(data, current, e, prior) for e in remaining),
-                key=lambda c: c.score,
-            )
-        )
+        scored = tuple(sorted((_score(data, current, e, prior) for e in remaining), key=lambda c: c.score))
         decision, evidence, ambiguous = _decide(fit, data, scored, findings, force_floor)
         chosen = next((c for c in scored if c.effect == decision), None)
         # every route obeys the tracked-force rule; it is checked again where the model changes
@@ -388,85 +439,12 @@ def run_discrepancy(
         current = parse_effects((*current, decision))
         fit = next(c.fit for c in scored if c.effect == decision)
         remaining.remove(decision)
-        if (
-            decision == "creep"
-            and candidates is None
-            and "creep2" not in remaining
-            and "creep2" not in current
-        ):
+        if decision == "creep" and creep2_follows and "creep2" not in remaining and "creep2" not in current:
             remaining.append("creep2")
         if not remaining:
             steps.append(Step(current, fit, describe_gaps(data, fit), (), None, "no candidates left"))
             break
-    floor = _floor(data)
-    unexplained = assess_residual(data, fit, floor, rivals, alternatives, real_time, meta)
-    unexplained = replace(unexplained, added=tuple(s.added for s in steps if s.added))
-    return DiscrepancyReport(
-        record=record_name,
-        channel=channel.name,
-        baseline=base,
-        candidates=pool,
-        steps=tuple(steps),
-        final_fit=fit,
-        notes=tuple(notes),
-        rivals=rivals,
-        noise_floor_log=floor,
-        noise_description=extra_description(small, meta),
-        unexplained=unexplained,
-    )
-
-
-def assess_residual(
-    data: FitData,
-    fit: FitResult,
-    floor_log: float,
-    rivals: Rivals | None,
-    alternatives: Alternatives | None = None,
-    real_time: bool = True,
-    metadata: Mapping[str, str] | None = None,
-) -> UnexplainedResidual:
-    """Whether the final model leaves an unexplained residual (see the module docstring, 5)."""
-    gap = fit.gap_test
-    reasons: list[str] = []
-    remains = False
-    ratio = gap.log_resistance_rms / floor_log if math.isfinite(floor_log) and floor_log > 0 else math.nan
-    if math.isfinite(ratio):
-        above = ratio > UNEXPLAINED_FLOOR_RATIO
-        remains |= above
-        reasons.append(
-            f"held-out log-R RMS {gap.log_resistance_rms:.4g} is {ratio:.2g} x the noise floor "
-            f"{floor_log:.4g} ({'above' if above else 'within'} the {UNEXPLAINED_FLOOR_RATIO:g} x allowed)"
-        )
-    else:
-        reasons.append("no noise floor to compare the held-out log-R RMS with")
-    statics: list[tuple[str, float]] = []
-    if rivals is not None:
-        statics = [
-            ("conductance line", rivals.line_force_rms_n),
-            ("monotone lookup", rivals.lookup_force_rms_n),
-        ]
-    finite = [a for a in statics if math.isfinite(a[1])]
-    best_static = min(finite, key=lambda a: a[1]) if finite else None
-    if best_static is not None and math.isfinite(gap.force_rms_n):
-        worse = gap.force_rms_n > best_static[1] * (1.0 + UNEXPLAINED_RIVAL_TIE)
-        remains |= worse
-        reasons.append(
-            f"held-out force RMS {gap.force_rms_n:.4g} N against the best static rival's "
-            f"({best_static[0]}) {best_static[1]:.4g} N ({'worse' if worse else 'not worse'} beyond the "
-            f"{100 * UNEXPLAINED_RIVAL_TIE:g} % tie)"
-        )
-    extra = list(alternatives(data)) if alternatives is not None else []
-    structure = residual_structure(data, fit, real_time, dict(metadata or {}))
-    return UnexplainedResidual(
-        remains=remains,
-        log_r_rms=gap.log_resistance_rms,
-        floor_log=floor_log,
-        force_rms_n=gap.force_rms_n,
-        best_static=best_static,
-        alternatives=tuple((str(n), float(v)) for n, v in (*statics, *extra)),
-        reasons=tuple(reasons),
-        structure=structure,
-    )
+    return steps, fit
 
 
 def prepare(

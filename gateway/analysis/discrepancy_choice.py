@@ -111,6 +111,50 @@ class CandidateScore:
     known_force_n: float = math.nan
 
 
+@dataclass(frozen=True)
+class Step:
+    """One round of the discrepancy workflow: the model before it (``effects_before``; on a
+    static curve, the effects on top of it and the curve in ``model_label``), where it
+    disagrees, the candidates scored, the one added (or None) and why."""
+
+    effects_before: tuple[str, ...]
+    fit_before: FitResult
+    findings: tuple[Finding, ...]
+    candidates: tuple[CandidateScore, ...]
+    added: str | None
+    evidence: str
+    ambiguous_with: str | None = None
+    #: the model before the step in words (empty: its effects)
+    model_label: str = ""
+
+    @property
+    def label(self) -> str:
+        return self.model_label or ", ".join(self.effects_before)
+
+    @property
+    def tracked_before(self) -> float:
+        """The held-out force RMS of the model before this step, read with the tracked state."""
+        return self.fit_before.gap_test.force_rms_n
+
+    @property
+    def tracked_after(self) -> float:
+        """The same after this step (the added candidate's; the model's own when nothing was added)."""
+        return self.chosen.gap_test.force_rms_n
+
+    @property
+    def chosen(self) -> FitResult:
+        """The model after this step: the added candidate's fit, or the model's own."""
+        for c in self.candidates:
+            if c.effect == self.added:
+                return c.fit
+        return self.fit_before
+
+    def refused(self) -> list[tuple[CandidateScore, str]]:
+        """The candidates the tracked-force rule refused at this step, with the reason."""
+        now = self.tracked_before
+        return [(c, why) for c in self.candidates if (why := refusal(c, now)) is not None]
+
+
 def penalized(fit: FitResult, data: FitData) -> float:
     """Held-out score, lower is better: the Gaussian log-likelihood of two groups of rows,
     each with its own variance, plus a BIC penalty:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ..atomic import atomic_write_text
@@ -39,6 +40,7 @@ def _unexplained_section(report: DiscrepancyReport) -> list[str]:
     title = "An unexplained residual remains" if u.remains else "No unexplained residual"
     lines = [f"## {title}", ""]
     lines += [f"- {r}" for r in u.reasons]
+    lines += [f"- possible cause: {c}" for c in u.causes]
     best = u.best_alternative
     if best is not None:
         lines.append(f"- best empirical alternative on held-out force: {best[0]} ({best[1]:.4g} N)")
@@ -68,9 +70,15 @@ def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path, real_t
     out_dir.mkdir(parents=True, exist_ok=True)
     lines = [f"# Discrepancy report: {report.record} (channel {report.channel})", ""]
     j = report.as_json()
-    lines.append(f"- baseline: `{', '.join(report.baseline)}`; candidates: `{', '.join(report.candidates)}`")
+    if report.static_choice is not None:
+        lines.append(f"- {report.static_choice.sentence()}")
+    if report.start is not None:
+        lines.append(f"- {report.start.sentence()}")
+    base = ", ".join(report.baseline) or report.steps[0].label
+    lines.append(f"- baseline: `{base}`; candidates: `{', '.join(report.candidates)}`")
     lines.append(
-        f"- added, in order: `{', '.join(j['added']) or 'nothing'}`; final model: `{', '.join(j['final'])}`"
+        f"- added, in order: `{', '.join(j['added']) or 'nothing'}`; final model: `{report.model_name}` "
+        f"(`{', '.join(j['final']) or 'no effect'}`)"
     )
     before, after = j["gap_before"], j["gap_after"]
     lines.append(
@@ -83,7 +91,7 @@ def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path, real_t
         lines.append(f"- note: {note}")
     lines.append("")
     for i, step in enumerate(report.steps, start=1):
-        lines.append(f"## Step {i}: model `{', '.join(step.effects_before)}`")
+        lines.append(f"## Step {i}: model `{step.label}`")
         lines.append("")
         g = step.fit_before.gap_test
         lines.append(
@@ -125,6 +133,8 @@ def write_report(report: DiscrepancyReport, data: FitData, out_dir: Path, real_t
     lines.append("|---|---|---|---|")
     for e in report.final_fit.estimates:
         interval = f"[{e.low:.4g}, {e.high:.4g}]" if e.fitted else "fixed"
+        if e.fitted and not (math.isfinite(e.low) and math.isfinite(e.high)):
+            interval = "not computed"
         lines.append(f"| {e.name} | {e.value:.5g} | {interval} | {e.note} |")
     path = out_dir / "report.md"
     atomic_write_text(path, "\n".join(lines) + "\n")

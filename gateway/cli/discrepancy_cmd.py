@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from ..analysis.discrepancy import decimate, prepare, run_discrepancy
+from ..analysis.discrepancy import decimate, parse_baseline, prepare, run_discrepancy
 from ..analysis.measurement import time_is_real
 from ..analysis.records import read_record
 from ..errors import RecordError
@@ -18,7 +18,14 @@ from .common import parse_assignments
 @click.command("discrepancy")
 @click.argument("record_path", metavar="RECORD.csv", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--channel", "channel_name", default=None, help="channel to examine (needed if several)")
-@click.option("--baseline", default="tunneling", show_default=True, help="effects of the starting model")
+@click.option(
+    "--baseline",
+    default="auto",
+    show_default=True,
+    help="where to start: auto (the best static form on held-out force: the paper's physics or a "
+    "static curve), effects of a physical model (tunneling,contact), or a curve kind "
+    "(power_law, line, lookup)",
+)
 @click.option(
     "--candidates", default=None, help="effects to try (default: every spec effect not in the model)"
 )
@@ -36,18 +43,24 @@ def discrepancy_cmd(
     out_dir: Path | None,
     as_json: bool,
 ) -> None:
-    """Fit the baseline, find where it disagrees, add the missing effects one by one."""
+    """Start from the sensor's best static form (or the baseline given), find where it
+    disagrees, add the missing effects one by one."""
     try:
-        base = parse_effects(baseline)
+        base = parse_baseline(baseline.split(","))
         cands = None if candidates is None else parse_effects(candidates)
         prior = SensorParams().with_overrides(parse_assignments(params, "--param"))
         record = read_record(record_path, require_force=True)
         channel = record.channel(channel_name)
-    except (RecordError, UnknownEffectError, ParameterError) as exc:
+    except (RecordError, UnknownEffectError, ParameterError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None
     try:
         report = run_discrepancy(
-            channel, base, cands, prior, record_name=str(record_path), metadata=record.metadata
+            channel,
+            None if base[0] == "auto" else baseline.split(","),
+            cands,
+            prior,
+            record_name=str(record_path),
+            metadata=record.metadata,
         )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
@@ -59,8 +72,12 @@ def discrepancy_cmd(
     if as_json:
         click.echo(json.dumps(report.as_json()))
         return
+    if report.static_choice is not None:
+        click.echo(report.static_choice.sentence())
+    if report.start is not None:
+        click.echo(report.start.sentence())
     for i, step in enumerate(report.steps, start=1):
-        click.echo(f"step {i}: model {', '.join(step.effects_before)}")
+        click.echo(f"step {i}: model {step.label}")
         for f in step.findings:
             click.echo(f"  - {f.sentence}")
         click.echo(f"  -> {'add ' + step.added if step.added else 'add nothing'}: {step.evidence}")
@@ -68,7 +85,8 @@ def discrepancy_cmd(
             before, after = step.tracked_before, step.tracked_after
             click.echo(f"  tracked held-out force RMS {before:.4g} -> {after:.4g} N")
     j = report.as_json()
-    click.echo(f"added: {', '.join(j['added']) or 'nothing'}; final model: {', '.join(j['final'])}")
+    effects = ", ".join(j["final"]) or "no effect"
+    click.echo(f"added: {', '.join(j['added']) or 'nothing'}; final model: {j['final_model']} ({effects})")
     click.echo(f"held-out gap before: {j['gap_before']}, after: {j['gap_after']}")
     click.echo(f"noise floor (log-R): {report.noise_floor_log:.4g}; {report.noise_description}")
     click.echo(report.rival_summary())

@@ -99,3 +99,22 @@ def test_no_step_reads_the_tracked_force_worse_and_an_unexplained_residual_remai
     finite = [a for a in u["alternatives"] if a["force_rms_n"] is not None]
     assert u["best_alternative"] == min(finite, key=lambda a: a["force_rms_n"])
     assert u["best_alternative"]["force_rms_n"] <= u["best_static_rival"]["force_rms_n"]
+
+
+def test_the_verdict_names_the_best_static_rival_not_the_line_alone() -> None:
+    """Issue 31 item 5: on the thick cell the physical model (tunneling) reads held-out force
+    better than the line but worse than the lookup; the verdict once said "the physical model
+    wins" against the line with the better lookup in the same sentence."""
+    record = read_record(THICK, require_force=True)
+    report = run_discrepancy(
+        record.channel(), baseline=("tunneling",), record_name="thick", metadata=record.metadata
+    )
+    statics = dict(report.static_rivals)
+    model = report.final_fit.gap_test.force_rms_n
+    best = min(statics, key=lambda n: statics[n])
+    print(f"\nthick: {report.rival_summary()}")
+    assert statics["conductance line"] > model > statics["monotone lookup"] >= statics[best]
+    summary = report.rival_summary()
+    assert f"THE {best.upper()} WINS: the physical model reads force worse ({model:.4g} N)" in summary
+    assert "the physical model wins" not in summary
+    assert report.as_json()["rivals"]["verdict"] == summary

@@ -213,7 +213,9 @@ def test_the_wear_record_has_every_axis_and_its_residual_climbs_run_by_run() -> 
     runs from its ``# runs:`` line) and each bin has its mean and RMS."""
     u = outcome("wear", 1).as_json()["unexplained_residual"]
     axes = {a["axis"]: a for a in u["structure"]["axes"]}
-    assert set(axes) == {"force", "time_in_hold", "direction", "rate", "temperature", "run", "elapsed"}
+    assert set(axes) == {
+        "force", "time_in_hold", "load_history", "direction", "rate", "temperature", "run", "elapsed",
+    }  # fmt: skip
     assert u["structure"]["skipped"] == []
     runs = axes["run"]["bins"]
     assert [b["label"].split(" (")[0] for b in runs] == ["in run 1", "in run 2", "in run 3", "in run 4"]
@@ -231,6 +233,7 @@ def test_a_record_without_runs_or_temperature_skips_those_axes_and_says_why() ->
     assert {a["axis"] for a in u["structure"]["axes"]} == {
         "force",
         "time_in_hold",
+        "load_history",
         "direction",
         "rate",
         "elapsed",
