@@ -146,6 +146,8 @@ def record(
             f"wrote {stats.rows} samples from {stats.polls} polls to {out_path} "
             f"({stats.read_errors} read errors)"
         )
+        for line in _loaded_starts(out_path):
+            click.echo(line)
     if stats.rows == 0:
         click.echo(
             f"record: no sample recorded in {duration_s:g} s: no device answered ({stats.read_errors} read "
@@ -154,6 +156,27 @@ def record(
             err=True,
         )
         raise SystemExit(1)
+
+
+def _loaded_starts(path: Path) -> list[str]:
+    """A line for each channel of the record at ``path`` that starts loaded
+    (``analysis.load_history.start_load``): a calibration or discrepancy of it starts from an
+    unknown load history there."""
+    from ..analysis.load_history import start_load
+    from ..analysis.records import RecordError, read_record
+
+    try:
+        record = read_record(path)
+    except (RecordError, OSError):
+        return []
+    out = []
+    for name, ch in record.channels.items():
+        if ch.n_samples == 0:
+            continue
+        start = start_load(ch.time_s, ch.resistance_ohm, ch.force_n)
+        if start.loaded:
+            out.append(f"note: channel {name}: {start.sentence()}")
+    return out
 
 
 def _played(array: Any, end_s: float) -> Callable[[], bool]:

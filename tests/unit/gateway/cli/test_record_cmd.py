@@ -40,3 +40,22 @@ def test_a_record_with_every_device_down_exits_1(tmp_path: Path) -> None:
     )
     assert result.exit_code == 1, result.output
     assert "no sample recorded in 0.5 s: no device answered" in result.output
+
+
+def test_record_says_which_channels_start_loaded(tmp_path: Path) -> None:
+    """A channel whose reference is 10 N from the first row starts loaded; one at 0 N does not."""
+    import numpy as np
+
+    from gateway.analysis.records import format_record, write_record
+    from gateway.cli.record_cmd import _loaded_starts
+
+    t = np.arange(0.0, 20.0, 0.5)
+    loaded = np.where(t < 10.0, 10.0, 0.0)
+    rest = np.where(t < 10.0, 0.0, 5.0)
+    r = np.column_stack([1e4 / np.maximum(loaded, 0.01), 1e4 / np.maximum(rest, 0.01)])
+    path = tmp_path / "rec.csv"
+    text = format_record({"time": "real"}, ["tip", "pad"], t, r, force_n=np.column_stack([loaded, rest]))
+    write_record(path, text)
+    lines = _loaded_starts(path)
+    assert len(lines) == 1 and "channel tip" in lines[0] and "starts loaded at 10 N" in lines[0], lines
+    assert _loaded_starts(tmp_path / "missing.csv") == []
