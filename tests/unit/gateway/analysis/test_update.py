@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from pathlib import Path
@@ -12,8 +13,9 @@ from click.testing import CliRunner
 
 from gateway.analysis.records import ChannelRecord
 from gateway.analysis.update import (
+    PhysicsChannel,
     UpdateError,
-    load_curves,
+    load_channels,
     rewrite_sensitivity,
     update_from_loads,
     update_from_record,
@@ -98,10 +100,10 @@ def test_rewrite_changes_only_gain_and_offset(tmp_path: Path) -> None:
 
 
 def test_errors_are_messages(tmp_path: Path) -> None:
-    no_curve = tmp_path / "physics.toml"
-    no_curve.write_text('[channel."pad"]\nr0_ohm = 17000.0\n', encoding="utf-8")
-    with pytest.raises(UpdateError, match=r"no \[curve.<name>\] table"):
-        load_curves(no_curve)
+    nothing = tmp_path / "meta.toml"
+    nothing.write_text('[meta]\nrecord = "bench.csv"\n', encoding="utf-8")
+    with pytest.raises(UpdateError, match="no calibrated channel"):
+        load_channels(nothing)
     with pytest.raises(UpdateError, match="force > 0 N"):
         update_from_loads("pad", CurveChannel(PowerLawCurve(K_S, N)), [(0.0, 1000.0)])
 
@@ -128,3 +130,77 @@ def test_cli_update_from_known_loads_and_from_a_record(tmp_path: Path) -> None:
     assert (
         bad.exit_code == 2 and "either RECORD.csv or --known" in bad.output and "Traceback" not in bad.output
     )
+
+
+def test_every_kind_of_calibration_loads_for_an_update(tmp_path: Path) -> None:
+    """A [curve], a [line], a [lookup] table and a physical model's [channel] table alone."""
+    path = tmp_path / "cal.toml"
+    path.write_text(
+        CAL + '[channel."tip"]\nr0_ohm = 20000.0\n[line."line"]\nslope_s_per_n = 2e-5\n'
+        "intercept_s = 1e-6\nforce_min_n = 0.1\nforce_max_n = 10.0\n"
+        '[lookup."lut"]\nresistance_ohm = [1e3, 1e4, 1e5]\nforce_n = [8.0, 2.0, 0.5]\n',
+        encoding="utf-8",
+    )
+    channels = load_channels(path)
+    assert isinstance(channels["tip"], PhysicsChannel) and channels["tip"].params.r0_ohm == 20000.0
+    kinds = {name: getattr(ch, "table_kind", "physics") for name, ch in channels.items()}
+    assert kinds == {"pad": "curve", "tip": "physics", "line": "line", "lut": "lookup"}
+
+
+def test_a_line_table_is_updated_into_a_curve_table_of_that_line(tmp_path: Path) -> None:
+    """The sensor conducts 1.25 x: a known load of 3 N reads R = 1 / (1.25 (m 3 + n)); gain 0.8
+    reads it; the [line] table becomes a [curve] line with gain 0.8, the rest kept."""
+    text = (
+        '# mine\n[line."tip"]\nslope_s_per_n = 2e-5\nintercept_s = 1e-6\n'
+        "force_min_n = 0.1\nforce_max_n = 10.0\n"
+    )
+    path = tmp_path / "line.toml"
+    path.write_text(text, encoding="utf-8")
+    line = load_channels(path)["tip"]
+    assert not isinstance(line, PhysicsChannel)
+    up = update_from_loads("tip", line, [(3.0, 1.0 / (1.25 * (2e-5 * 3.0 + 1e-6)))])
+    assert up.after.gain == pytest.approx(0.8, rel=1e-6)
+    new = rewrite_sensitivity(text, {"tip": up.after})
+    data = tomllib.loads(new)
+    assert "line" not in data and data["curve"]["tip"]["kind"] == "line"
+    assert data["curve"]["tip"]["gain"] == pytest.approx(0.8, rel=1e-6)
+    assert new.startswith("# mine")
+    out = tmp_path / "updated.toml"
+    out.write_text(new, encoding="utf-8")
+    assert load_channels(out)["tip"] == dataclasses.replace(up.after, table_kind="curve")
+
+
+def test_a_physical_model_is_updated_by_a_gain_on_its_resistances(tmp_path: Path) -> None:
+    """A sensor that now reads every resistance half of what the stored model says: the gain
+    is 2 (the model reads R x 2 as it read R), and every resistance parameter is halved."""
+    from gateway.model import SensorModel, SensorParams
+
+    params = SensorParams()
+    channel = PhysicsChannel(params, ("tunneling", "contact"))
+    model = SensorModel(("tunneling", "contact"), [params])
+    loads = [(f, 0.5 * float(model.resistance(np.array([f]))[0])) for f in (1.0, 4.0)]
+    up = update_from_loads("tip", channel, loads)
+    assert isinstance(up.after, PhysicsChannel)
+    assert up.after.gain == pytest.approx(2.0, rel=1e-4) and up.rms_after_n < 1e-3 < up.rms_before_n
+    scaled = up.after.scaled_params()
+    assert scaled["r0_ohm"] == pytest.approx(params.r0_ohm / 2.0, rel=1e-4)
+    assert scaled["rho2_ohm_m"] == pytest.approx(params.rho2_ohm_m / 2.0, rel=1e-4)
+
+
+def test_the_rest_of_the_run_is_the_transfer_test() -> None:
+    """Update from the first 30 s of a 60 s record; the rest is scored with the state carried
+    over, in % of the whole run's full scale, beside a lookup re-fitted on the head."""
+    channel = CurveChannel(PowerLawCurve(K_S, N))
+    t = np.arange(0.0, 60.0, 0.5)
+    f = 1.0 + 4.0 * (np.sin(t / 3.0) ** 2)
+    r = 1.0 / (1.25 * K_S * f)
+    rec = ChannelRecord("0", t, r, f, None, np.arange(t.size, dtype=np.int64))
+    up = update_from_record("pad", channel, rec, first_s=30.0)
+    assert up.transfer is not None
+    assert up.transfer.rows == int(np.count_nonzero(t >= 30.0))
+    assert up.transfer.full_scale_n == pytest.approx(float(f.max()))
+    assert up.transfer.rms_after_n < 1e-5 < up.transfer.rms_before_n
+    assert up.transfer.pct(up.transfer.rms_before_n) == pytest.approx(
+        100.0 * float(np.sqrt(np.mean((1.25 * f - f)[t >= 30.0] ** 2))) / float(f.max()), rel=1e-6
+    )
+    assert "the rest of the run" in up.describe()
