@@ -15,12 +15,14 @@ ranking fits: ``creep`` (one Kelvin element, its recovery time constant free), `
 second, slower one, once ``creep`` is in) and ``hysteresis``. Each step tries every effect not
 yet in, on the curve kind that reads best with it, and adds the one that lowers the tracked
 held-out force most, if it lowers it by at least ``MIN_FORCE_GAIN`` (the force route's share,
-``discrepancy_choice``), reads the held-out log-R better too, and the tracked-force rule allows
-it (never a worse reading). The two measures weigh the rows differently (log-R is the force
-error relative to the curve's slope, heaviest at light loads): an effect the data have reads
-better on both, one that only trades the light loads' error for the heavy ones' does not (on
-the clean power-law record, hysteresis on top of creep: force 0.0915 -> 0.0885 N, log-R
-0.0102 -> 0.0117).
+``discrepancy_choice``), the tracked-force rule allows it (never a worse reading), and the
+product of its held-out force ratio (against the current model) and held-out log-R ratio
+(against the same curve kind without it: a kind's shape is not the effect's doing) is below 1.
+The two measures weigh the rows differently (log-R is the force error relative to the curve's
+slope, heaviest at light loads): an effect that only trades the light loads' error for a
+little of the heavy ones' is not added (on the clean power-law record, hysteresis on top of
+creep: force 0.0915 -> 0.0885 N, -3.3 %, log-R 0.0102 -> 0.0117, +15 %); one whose force gain
+outweighs its log-R cost is (a third off the force for a sixth more log-R).
 ``temperature`` has no curve form: where the record carries a temperature, its residual's
 structure shows it.
 
@@ -265,7 +267,10 @@ def curve_steps(
             key=lambda c: _finite_or_inf(c.gap_test.force_rms_n),
         )
         findings = describe_gaps(data, fit)
-        added, evidence, ambiguous = decide_on_curve(fit, scored, kind, on)
+        # each effect's log-R is judged against its own curve without it: a curve kind's shape
+        # is not the effect's doing
+        without = {e: fit_of((on[e], current)) if (on[e], current) in fitted else fit for e in options}
+        added, evidence, ambiguous = decide_on_curve(fit, scored, kind, on, without)
         label = curve_label(kind, [e for e in CURVE_EFFECTS if e in current])
         steps.append(Step(fit.effects, fit, findings, tuple(scored), added, evidence, ambiguous, label))
         if added is None:
@@ -281,13 +286,18 @@ def _finite_or_inf(x: float) -> float:
 
 
 def decide_on_curve(
-    fit: FitResult, scored: Sequence[CandidateScore], kind: str = "", on: Mapping[str, str] | None = None
+    fit: FitResult,
+    scored: Sequence[CandidateScore],
+    kind: str = "",
+    on: Mapping[str, str] | None = None,
+    without: Mapping[str, FitResult] | None = None,
 ) -> tuple[str | None, str, str | None]:
     """The effect to add on a curve (or None), the evidence in words and the runner-up when
     they tie (module docstring): the lowest tracked held-out force among the candidates the
-    tracked-force rule allows that also read the held-out log-R better, if it is at least
-    ``MIN_FORCE_GAIN`` below the current one. ``kind``: the current curve; ``on``: the curve
-    each candidate reads best on."""
+    tracked-force rule allows whose held-out force and log-R ratios multiply to less than 1,
+    if it is at least ``MIN_FORCE_GAIN`` below the current one. ``kind``: the current curve; ``on``: the curve
+    each candidate reads best on; ``without``: that curve fitted without the candidate, whose
+    held-out log-R the candidate's is compared with (default: ``fit``'s)."""
     on = on or {}
 
     def where(effect: str) -> str:
@@ -306,8 +316,16 @@ def decide_on_curve(
     refused = {c.effect: why for c in scored if (why := refusal(c, now)) is not None}
     for c in scored:
         after_log = c.gap_test.log_resistance_rms
-        if c.effect not in refused and not (math.isfinite(after_log) and after_log < now_log):
-            refused[c.effect] = f"reads the held-out log-R worse ({now_log:.4f} -> {after_log:.4f})"
+        base = (without or {}).get(c.effect, fit)
+        before_log = base.gap_test.log_resistance_rms
+        ok = before_log > 0 and now > 0
+        both = (after_log / before_log) * (c.gap_test.force_rms_n / now) if ok else math.nan
+        if c.effect not in refused and not (math.isfinite(both) and both < 1.0):
+            curve = f" on the {on.get(c.effect, kind)} curve" if base is not fit else ""
+            refused[c.effect] = (
+                f"reads the held-out log-R worse{curve} ({before_log:.4f} -> {after_log:.4f}) by more than "
+                f"it reads the force better ({now:.4g} -> {c.gap_test.force_rms_n:.4g} N)"
+            )
     skipped = "; ".join(f"{e} {why}" for e, why in refused.items())
     skipped = f"; not added: {skipped}" if skipped else ""
     eligible = [c for c in scored if c.effect not in refused]
