@@ -450,6 +450,10 @@ def format_apply_report(applied: Applied, errors: Sequence[ChannelErrors | None]
             f"[channel] table, so it is read with the paper's effects ({', '.join(applied.effects)})"
         )
     for ch in applied.channels:
+        zero_noise = ch.record.zero_noise_note()
+        if zero_noise:
+            lines.append(f"note: {zero_noise}")
+    for ch in applied.channels:
         counts = ", ".join(f"{k} {v}" for k, v in ch.status_counts().items())
         lines.append(f"  {ch.name} <- [{ch.calibration_channel}] read by {ch.model}: {counts}")
     overall = overall_errors(applied)

@@ -125,6 +125,9 @@ def calibrate(
     meta = dict(metadata or {})
     prior = prior or SensorParams()
     notes: list[str] = []
+    zero_noise = channel.zero_noise_note()
+    if zero_noise:
+        notes.append(zero_noise)
     warnings: list[str] = []
     chosen = parse_effects(effects)
     if not time_is_real(meta) and any(e in chosen for e in TIME_EFFECTS):
