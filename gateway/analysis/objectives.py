@@ -30,6 +30,7 @@ is then a bound, and its interval is one-sided.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import replace
 
 import numpy as np
@@ -37,6 +38,7 @@ from numpy.typing import NDArray
 
 from ..keys import Choice
 from ..model import SensorModel, SensorParams
+from ..model.series import ForceSeries
 from .fit_data import FitData
 
 FloatArray = NDArray[np.float64]
@@ -61,6 +63,9 @@ LOG_R_F_SCALE = 0.05
 FORCE_F_SCALE_SHARE = 0.05
 #: sensitivity floor, as a share of 1 / full scale
 SENSITIVITY_FLOOR_SHARE = 0.01
+#: force histories a problem keeps (at the offsets of a Jacobian's base point and offset column,
+#: each stepped up or not)
+KEPT_HISTORIES = 4
 
 
 class Objective(Choice):
@@ -162,6 +167,7 @@ class Problem:
         self.floor = SENSITIVITY_FLOOR_SHARE / scale
         self.penalty = scale  # a force error of full scale where the model is undefined
         self.step = force_step(data.force_n + offset)
+        self._histories: OrderedDict[tuple[float, bool], ForceSeries] = OrderedDict()
 
     def params(self, x: FloatArray) -> SensorParams:
         values = {}
@@ -208,15 +214,24 @@ class Problem:
                 hi.append(LOG_BOUND)
         return np.array(lo), np.array(hi)
 
-    def model_ohm(
-        self, params: SensorParams, offset: float | None = None, shift: float | FloatArray = 0.0
-    ) -> FloatArray:
+    def model_ohm(self, params: SensorParams, offset: float | None = None, up: bool = False) -> FloatArray:
         """The model's resistance on every row, driven by the record's force history plus the
-        offset (and plus ``shift``, per row or everywhere, for the sensitivity)."""
-        force = self.data.force_n + (self.offset0 if offset is None else offset) + shift
-        model = SensorModel(self.effects, params)
-        out, _ = model.simulate(force[:, None], self.data.time_s, temperature_c=self.temp)
-        return np.asarray(out.total_ohm[:, 0])
+        offset (and plus the sensitivity's ``step`` when ``up``)."""
+        history = self._history(self.offset0 if offset is None else offset, up)
+        return np.asarray(SensorModel(self.effects, params).total_ohm(history, self.temp)[:, 0])
+
+    def _history(self, offset: float, up: bool) -> ForceSeries:
+        """The force history at this offset (stepped up or not): the last few are kept, with the
+        state series solved on them (``ForceSeries``), since most residuals share them."""
+        key = (offset, up)
+        history = self._histories.pop(key, None)
+        if history is None:
+            force = self.data.force_n + offset + (self.step if up else 0.0)
+            history = ForceSeries.of(force[:, None], self.data.time_s, 1)
+        self._histories[key] = history
+        if len(self._histories) > KEPT_HISTORIES:
+            self._histories.popitem(last=False)
+        return history
 
     def log_residual(self, params: SensorParams, offset: float | None = None) -> FloatArray:
         """ln R_measured - ln R_model on every row (NaN where either side is not finite)."""
@@ -236,7 +251,7 @@ class Problem:
         model = self.model_ohm(params, offset)
         with np.errstate(divide="ignore", invalid="ignore"):
             base = np.log(model)
-            up = np.log(self.model_ohm(params, offset, self.step))
+            up = np.log(self.model_ohm(params, offset, up=True))
         log_res = log_ratio(self.data.resistance_ohm, model)
         t = self.train
         res = force_residual(log_res[t], base[t], up[t], self.step[t], self.floor)

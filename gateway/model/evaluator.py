@@ -98,29 +98,20 @@ class ResistanceEvaluator:
         force_n: FloatArray,
         state_strains: dict[str, FloatArray],
         temp_factor: ArrayLike,
+        contact_root: tuple[NDArray[np.bool_], FloatArray] | None = None,
     ) -> ResistanceBreakdown:
         """Every term at forces ``force_n`` (>= 0), with the state-carrying effects' strains
         (by breakdown name) and the temperature factor. F = 0 with contact on is an open
-        contact: +inf (or R_leak with leakage)."""
+        contact: +inf (or R_leak with leakage). ``contact_root``: (F > 0, sqrt F there) when
+        the caller has them (``ForceSeries.contact_root``)."""
         f = force_n
-        elastic = self.elastic_strain(np.maximum(f, 0.0))
-        strain = elastic
-        if state_strains:
-            terms = list(state_strains.values())
-            state_strain = terms[0]
-            for term in terms[1:]:
-                state_strain = state_strain + term
-            strain = elastic + state_strain
-        polymer = polymer_resistance_ohm(np.asarray(temp_factor) * self.r0_ohm, strain, self.gamma_s0)
-        with np.errstate(divide="ignore"):
-            contact = np.where(f > 0.0, self.contact_k / np.sqrt(np.where(f > 0.0, f, 1.0)), np.inf)
-        contact = np.where(self.contact_k > 0.0, contact, 0.0)
-        core = polymer + contact + self.series_ohm
-        total = parallel(core, self.leak_ohm) if self.has_leak else core
+        elastic, strain, polymer, contact, total = self._terms(f, state_strains, temp_factor, contact_root)
         shape = np.broadcast_shapes(f.shape, np.shape(total))
 
         def full(x: ArrayLike) -> FloatArray:
-            return np.broadcast_to(np.asarray(x, dtype=np.float64), shape).astype(np.float64)
+            out = np.empty(shape)
+            out[...] = x
+            return out
 
         zero = np.zeros(shape)
         return ResistanceBreakdown(
@@ -136,6 +127,49 @@ class ResistanceEvaluator:
             kv2_strain=full(state_strains.get("kv2_strain", zero)),
             hysteresis_strain=full(state_strains.get("hysteresis_strain", zero)),
         )
+
+    def forward_ohm(
+        self,
+        force_n: FloatArray,
+        state_strains: dict[str, FloatArray],
+        temp_factor: ArrayLike,
+        contact_root: tuple[NDArray[np.bool_], FloatArray] | None = None,
+    ) -> FloatArray:
+        """``breakdown(...).total_ohm`` (the same numbers) without the other terms' arrays."""
+        total = self._terms(force_n, state_strains, temp_factor, contact_root)[4]
+        shape = np.broadcast_shapes(force_n.shape, total.shape)
+        if total.shape == shape and total.dtype == np.float64:
+            return total
+        out = np.empty(shape)
+        out[...] = total
+        return out
+
+    def _terms(
+        self,
+        f: FloatArray,
+        state_strains: dict[str, FloatArray],
+        temp_factor: ArrayLike,
+        contact_root: tuple[NDArray[np.bool_], FloatArray] | None,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """elastic strain, total strain, polymer, contact and total resistance at forces f >= 0."""
+        elastic = self.elastic_strain(np.maximum(f, 0.0))
+        strain = elastic
+        if state_strains:
+            terms = list(state_strains.values())
+            state_strain = terms[0]
+            for term in terms[1:]:
+                state_strain = state_strain + term
+            strain = elastic + state_strain
+        polymer = polymer_resistance_ohm(np.asarray(temp_factor) * self.r0_ohm, strain, self.gamma_s0)
+        positive, root = (f > 0.0, None) if contact_root is None else contact_root
+        with np.errstate(divide="ignore"):
+            if root is None:
+                root = np.sqrt(np.where(positive, f, 1.0))
+            contact = np.where(positive, self.contact_k / root, np.inf)
+        contact = np.where(self.contact_k > 0.0, contact, 0.0)
+        core = polymer + contact + self.series_ohm
+        total = parallel(core, self.leak_ohm) if self.has_leak else core
+        return elastic, strain, polymer, contact, np.asarray(total)
 
     def ohm_from_parts(
         self, elastic_strain: FloatArray, fixed_ohm: FloatArray, state_strain: FloatArray, r0: FloatArray

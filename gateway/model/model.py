@@ -23,6 +23,7 @@ from .effects import EFFECTS, parse_effects
 from .evaluator import ResistanceBreakdown, ResistanceEvaluator
 from .inversion import INVALID, Inversion, Inverter, hold_invalid
 from .params import ChannelParams, SensorParams
+from .series import ForceSeries
 from .state import ModelState
 from .submodels import Factor, ParallelPath, SeriesTerm, StrainState, Submodel, Tunneling
 
@@ -165,25 +166,21 @@ class SensorModel:
             changes.update(effect.record(state, f))
         return state.updated(changes)
 
-    def _state_series(
-        self, force_n: FloatArray, dt_s: FloatArray, state0: ModelState
-    ) -> tuple[dict[str, FloatArray], ModelState]:
-        """Each state effect's strain before each sample for a known force series (T, N).
+    def _state_series(self, history: ForceSeries) -> tuple[dict[str, FloatArray], ModelState]:
+        """Each state effect's strain before each sample of ``history``, and the state after it.
 
-        ``dt_s[k]`` is the time from sample k-1 to sample k (dt_s[0] from the state's time).
         Every state variable obeys a linear recurrence x[k+1] = a[k] x[k] + b[k], solved
         in vectorized chunks; the result equals stepping ``relax``/``record`` sample by sample.
         """
-        held = np.maximum(np.vstack([state0.last_force_n[None, :], force_n[:-1]]), 0.0)  # before k
-        dt = np.broadcast_to(dt_s.reshape(-1, 1), force_n.shape)
         strains: dict[str, FloatArray] = {}
         changes: dict[str, FloatArray] = {}
         for effect in self.state_effects:
-            strain, end = effect.series(force_n, held, dt, state0)
+            strain, end = history.solve(effect)
             if strain is not None:
                 strains[effect.term] = strain
             changes.update(end)
         # kv ends are "before the last sample's relax"; the final state is after recording it
+        force_n, state0 = history.force_n, history.state0
         changes["last_force_n"] = force_n[-1] if force_n.shape[0] else state0.last_force_n
         return strains, state0.updated({k: np.asarray(v) for k, v in changes.items()})
 
@@ -200,13 +197,22 @@ class SensorModel:
         The state is relaxed from ``t0_s`` (default: the first sample time) to each sample.
         Returns the per-sample breakdown and the state after the last sample.
         """
-        f = np.maximum(np.atleast_2d(np.asarray(force_n, dtype=np.float64)), 0.0)
-        f = np.broadcast_to(f, (f.shape[0], self.n_channels)).copy()
-        t = np.asarray(time_s, dtype=np.float64).reshape(-1)
-        state0 = state0 or self.initial_state()
-        dt = np.diff(t, prepend=t[0] if t0_s is None else t0_s)
-        strains, final = self._state_series(f, dt, state0)
-        return self.evaluator.breakdown(f, strains, self._temperature_factor(temperature_c)), final
+        history = ForceSeries.of(force_n, time_s, self.n_channels, state0 or self.initial_state(), t0_s)
+        strains, final = self._state_series(history)
+        temp = self._temperature_factor(temperature_c)
+        return self.evaluator.breakdown(history.force_n, strains, temp, history.contact_root()), final
+
+    def total_ohm(self, history: ForceSeries, temperature_c: ArrayLike | None = None) -> FloatArray:
+        """The total resistance (T, N) in ohm over ``history``: ``simulate``'s ``total_ohm``, the
+        same numbers, for a fit that drives one history with many parameter sets (the state
+        effects' series are reused from ``history`` while their parameters are unchanged)."""
+        strains: dict[str, FloatArray] = {}
+        for effect in self.state_effects:
+            strain = history.solve(effect)[0]
+            if strain is not None:
+                strains[effect.term] = strain
+        temp = self._temperature_factor(temperature_c)
+        return self.evaluator.forward_ohm(history.force_n, strains, temp, history.contact_root())
 
     # ------------------------------------------------------------------- inverse
     def invert(
@@ -276,7 +282,7 @@ class SensorModel:
         inv = self.inverter.invert(r, self._state_strain(state0), temp, None)
         for _ in range(max_sweeps):
             held = hold_invalid(inv, state0.last_force_n)
-            strains, final = self._state_series(held, dt, state0)
+            strains, final = self._state_series(ForceSeries(held, dt, state0))
             if not self.state_effects:
                 return inv, final
             guess = inv.force_n
@@ -286,7 +292,7 @@ class SensorModel:
                 1.0, float(np.nanmax(np.abs(guess), initial=0.0))
             ):
                 held = hold_invalid(inv, state0.last_force_n)
-                return inv, self._state_series(held, dt, state0)[1]
+                return inv, self._state_series(ForceSeries(held, dt, state0))[1]
         return self._track_loop(r, dt, state0, temperature_c)
 
     def _track_loop(

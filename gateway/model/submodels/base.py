@@ -76,6 +76,9 @@ class StrainState(Submodel):
     #: the ``ModelState`` fields this effect owns, and its name in ``ResistanceBreakdown``
     fields: ClassVar[tuple[str, ...]] = ()
     term: ClassVar[str]
+    #: every ``ChannelParams`` field that ``series`` reads: equal values give the same series
+    #: (``ForceSeries`` reuses it; a field missing here would reuse a stale one)
+    series_parameters: ClassVar[tuple[str, ...]] = ()
 
     def strain(self, state: ModelState) -> FloatArray | None:
         """The strain this effect adds in ``state`` (None: none)."""

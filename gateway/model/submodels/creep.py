@@ -24,6 +24,7 @@ class Creep(StrainState):
     parameters: ClassVar[tuple[str, ...]] = ("e1_pa", "e1_slope_pa_per_n", "mu1_pa_s", "mu1_slope_pa_s_per_n")
     fields: ClassVar[tuple[str, ...]] = ("kv1_strain",)
     term: ClassVar[str] = "kv1_strain"
+    series_parameters: ClassVar[tuple[str, ...]] = ("area_m2", *parameters)
 
     def _log_decay(self, held_n: FloatArray, dt_s: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """log of the per-step decay factor, -E1 dt / mu1, and the target strain sigma / E1."""

@@ -23,6 +23,7 @@ class Creep2(StrainState):
     parameters: ClassVar[tuple[str, ...]] = ("e2_pa", "mu2_pa_s")
     fields: ClassVar[tuple[str, ...]] = ("kv2_strain",)
     term: ClassVar[str] = "kv2_strain"
+    series_parameters: ClassVar[tuple[str, ...]] = ("area_m2", *parameters)
 
     def strain(self, state: ModelState) -> FloatArray | None:
         return state.kv2_strain

@@ -29,6 +29,7 @@ class Hysteresis(StrainState):
     parameters: ClassVar[tuple[str, ...]] = ("hysteresis_strain", "hysteresis_force_n")
     fields: ClassVar[tuple[str, ...]] = ("play_n", "direction")
     term: ClassVar[str] = "hysteresis_strain"
+    series_parameters: ClassVar[tuple[str, ...]] = parameters
 
     def strain(self, state: ModelState) -> FloatArray | None:
         return np.asarray(-self.params.hysteresis_strain * state.direction)
