@@ -257,7 +257,7 @@ def calibrate(
 
 #: The physical model's fit (up to 8 fits of a stiff model) uses at most this many rows; every
 #: calibration is scored on all the rows the candidates are fitted on.
-PHYSICS_FIT_ROWS = 3000
+PHYSICS_FIT_ROWS = 4000
 #: ``objective="auto"`` tries the force objective (5 more fits) only while the log-R fit reads
 #: held-out force within this factor of the monotone lookup's: beyond it the physical model is
 #: out of contention on the record, and its second objective would cost minutes for nothing.
