@@ -262,6 +262,8 @@ PHYSICS_FIT_ROWS = 4000
 #: held-out force within this factor of the monotone lookup's: beyond it the physical model is
 #: out of contention on the record, and its second objective would cost minutes for nothing.
 CONTENTION_FACTOR = 1.5
+
+
 def _every_kth(data: FitData, max_rows: int) -> FitData:
     """``data`` itself, or every k-th row of it so that at most ``max_rows`` remain."""
     n = data.time_s.size

@@ -231,9 +231,7 @@ def _rms(v: FloatArray) -> float:
     return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
 
 
-def _solve(
-    channel: Calibrated, residual: Callable[[Calibrated], FloatArray], fit_offset: bool
-) -> Calibrated:
+def _solve(channel: Calibrated, residual: Callable[[Calibrated], FloatArray], fit_offset: bool) -> Calibrated:
     """Bounded least squares in (ln gain, offset) from the stored values."""
     g0 = math.log(channel.gain)
     lo, hi = g0 - math.log(GAIN_SPAN), g0 + math.log(GAIN_SPAN)

@@ -34,6 +34,7 @@ def preisach_direction(x: np.ndarray, width: float) -> np.ndarray:
     """The plays' direction from plays at 0 N (``drift.play_direction_series``)."""
     return play_direction_series(x, width, 0.0)
 
+
 # ---------------------------------------------------------------- Kelvin regressor
 
 
@@ -282,7 +283,8 @@ def test_hold_drift_by_hand() -> None:
     drifts = hold_drifts(t, ref, force, rows)
     assert [d.after_higher for d in drifts] == [False, True]
     assert drifts[0].change_n == pytest.approx(0.455, rel=1e-9)
-    assert drifts[1].start_error_n == pytest.approx(0.3, rel=1e-12) and drifts[1].change_n == pytest.approx(0.0)
+    assert drifts[1].start_error_n == pytest.approx(0.3, rel=1e-12)
+    assert drifts[1].change_n == pytest.approx(0.0)
     groups = drift_groups_pct(drifts, 4.0)
     assert groups.others_pct_fs == pytest.approx(100 * 0.455 / 4, rel=1e-9)
     assert groups.after_higher_pct_fs == pytest.approx(0.0, abs=1e-9)

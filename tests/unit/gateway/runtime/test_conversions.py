@@ -287,9 +287,7 @@ def test_conversions_refuse_values_outside_their_ranges(build: object, key: str,
 
 
 def test_a_channel_refuses_something_that_is_not_a_conversion() -> None:
-    with pytest.raises(
-        ConfigError, match="conversion: expected None or a CurveChannel"
-    ):
+    with pytest.raises(ConfigError, match="conversion: expected None or a CurveChannel"):
         ChannelConfig(0, "ch00", 0.0, 0.0, True, PAPER_EFFECTS, SensorParams(), None, (M, N))  # type: ignore[arg-type]
 
 
