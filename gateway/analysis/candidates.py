@@ -194,15 +194,32 @@ class _Regressors:
         self.tau_high_s = 0.5 * float(t[-1] - t[0]) if t.size else 0.0
         self._k: dict[tuple[float, float], FloatArray] = {}
         self._s: dict[float, FloatArray] = {}
+        self._u: dict[tuple[float, float], FloatArray] = {}
         self.reading = self.force  # the curve's reading x the play follows (set per curve)
 
     def resolved(self, tau_s: float) -> bool:
         return self.tau_low_s <= tau_s <= self.tau_high_s
 
     def read_with(self, x_hat: FloatArray) -> None:
-        """Drive the hysteresis regressors by this curve's reading."""
+        """Drive the hysteresis and sensitivity regressors by this curve's reading."""
         self.reading = x_hat
         self._s.clear()
+        self._u.clear()
+
+    def sensitivity(self, tau_s: float, recovery_tau_s: float) -> FloatArray:
+        """A unit Kelvin element driven by the curve's reading held over each interval (the
+        sensitivity element follows the reading, ``gateway.model.drift``), from the first."""
+        key = (tau_s, recovery_tau_s)
+        if key not in self._u:
+            x = np.asarray(self.reading, dtype=np.float64)
+            finite = np.isfinite(x)
+            idx = np.where(finite, np.arange(x.size), 0)
+            np.maximum.accumulate(idx, out=idx)
+            first = float(np.maximum(x[finite][0], 0.0)) if finite.any() else 0.0
+            carried = np.where(finite[idx], np.maximum(x[idx], 0.0), first)
+            held = np.concatenate([[first], carried[:-1]])
+            self._u[key] = kelvin_unit_series(held, self.dt, tau_s, recovery_tau_s, first)
+        return self._u[key]
 
     def kelvin(self, tau_s: float, recovery_tau_s: float | None = None) -> FloatArray:
         key = (tau_s, tau_s if recovery_tau_s is None else recovery_tau_s)
@@ -293,7 +310,7 @@ def _columns(reg: _Regressors, form: str, grid: GridPoint) -> list[FloatArray]:
     tau1, tau2, width, factor = grid
     cols: list[FloatArray] = []
     if sens:
-        cols.append(reg.kelvin(tau1, tau1 * factor))
+        cols.append(reg.sensitivity(tau1, tau1 * factor))
         if hyst:
             with np.errstate(invalid="ignore", divide="ignore"):
                 cols.append(reg.hysteresis(width) / reg.force)
@@ -356,7 +373,7 @@ def _design(reg: _Regressors, d: Drift) -> FloatArray:
     if d.hysteresis_fraction:
         scaled = scaled + d.hysteresis_fraction * reg.hysteresis(d.hysteresis_width_n)
     if d.sensitivity_per_n:
-        k = reg.kelvin(d.sensitivity_tau_s, d.recovery_sensitivity_tau_s)
+        k = reg.sensitivity(d.sensitivity_tau_s, d.recovery_sensitivity_tau_s)
         scaled = scaled * np.exp(d.sensitivity_per_n * k)
     return out + scaled - reg.force
 

@@ -17,9 +17,12 @@ The apparent force x (N) a static curve reads moves away from the applied force 
   (``creep2``, a slower one). A fraction may be negative: some FSRs' conductance *falls* under
   a held high load and rises again at a low one (the real records of docs/calibration.md); the
   settled reading (1 + a1 + a2) F must still rise with F, which every fit keeps.
-* u, the *sensitivity* element: the log of the sensor's sensitivity relaxes towards c F_{k-1}
-  (``sensitivity_per_n`` c, 1/N) with its own loading and recovery time constants
-  (``sensitivity_tau_s``, ``sensitivity_recovery_tau_s``), u <- T + (u - T) e, T = c F_{k-1}.
+* u, the *sensitivity* element: the log of the sensor's sensitivity relaxes towards c x_{k-1}
+  (``sensitivity_per_n`` c, 1/N; the reading held over the interval) with its own loading and
+  recovery time constants (``sensitivity_tau_s``, ``sensitivity_recovery_tau_s``),
+  u <- T + (u - T) e, T = c x_{k-1}. Like the plays, it follows the reading, not the estimated
+  force: with c < 0 an element on the estimate feeds back (a larger estimate lowers the
+  sensitivity, which raises the estimate) and, above a reading of 1 / (e |c|), runs away.
   Where z_i adds a force that scales with the load (the same newtons at any later load until
   it has recovered), u scales the reading: an FSR whose conductance falls by 40 % under a held
   25 N (c < 0) reads a following 3.3 N hold 40 % low at first, about 1.3 N, not 10 N, and
@@ -30,7 +33,7 @@ The apparent force x (N) a static curve reads moves away from the applied force 
   estimated force (a play on the estimate feeds back and flips between branches on noise).
 
 The state at the first sample is the *equilibrium at the first load*: z_i = a_i F_0,
-u = c F_0 and every play at x_0 (s = 0), so x_0 = F_0 (exp(c F_0) + a1 + a2), solved for F_0.
+u = c x_0 and every play at x_0 (s = 0), so F_0 = x_0 / (exp(c x_0) + a1 + a2).
 A sensor at rest (x_0 = 0) starts relaxed, as before; a sensor already loaded when the record
 or the gateway starts is not read as if its load had just been applied.
 """
@@ -240,18 +243,9 @@ def play_direction_series(reading_n: FloatArray, width_n: float, start_n: float 
 
 
 def equilibrium_force_n(apparent_n: float, drift: Drift) -> float:
-    """F_0 (N, at least 0) with x_0 = F_0 (exp(c F_0) + a1 + a2): the force a reading x_0
-    means for a sensor that has held that load long enough for every element to settle
-    (a few Newton steps where the sensitivity element is on; x_0 / (1 + a1 + a2) without it)."""
+    """F_0 = x_0 / (exp(c x_0) + a1 + a2) (N, at least 0): the force a reading x_0 means for a
+    sensor that has held that load long enough for every element to settle."""
     if not math.isfinite(apparent_n) or apparent_n <= 0.0:
         return 0.0
-    a = sum(f for f, _, _ in drift.elements)
-    c = drift.sensitivity_per_n
-    f = apparent_n / (1.0 + a) if 1.0 + a > 0.0 else 0.0
-    for _ in range(50 if c else 0):
-        e = math.exp(c * f)
-        step = (f * (e + a) - apparent_n) / (e * (1.0 + c * f) + a)
-        f = max(f - step, 0.0)
-        if abs(step) <= 1e-14 * max(f, 1e-300):
-            break
-    return f
+    total = math.exp(drift.sensitivity_per_n * apparent_n) + sum(a for a, _, _ in drift.elements)
+    return max(apparent_n / total, 0.0) if total > 0.0 else 0.0

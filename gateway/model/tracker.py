@@ -54,11 +54,13 @@ class CurveState:
     started: BoolArray
     #: the log of each channel's sensitivity (``drift``'s sensitivity element; 0 at rest)
     log_gain: FloatArray
+    #: the last valid reading x (N): what the sensitivity element follows
+    last_reading_n: FloatArray
 
     @classmethod
     def zeros(cls, n: int) -> CurveState:
         zero = np.zeros(n)
-        return cls(zero, zero, np.zeros((n, len(PLAY_SHARES))), zero, np.zeros(n, dtype=np.bool_), zero)
+        return cls(zero, zero, np.zeros((n, len(PLAY_SHARES))), zero, np.zeros(n, dtype=np.bool_), zero, zero)
 
     @classmethod
     def rested(cls, n: int) -> CurveState:
@@ -68,7 +70,7 @@ class CurveState:
     def select(self, idx: NDArray[np.intp]) -> CurveState:
         return CurveState(
             self.z1[idx], self.z2[idx], self.play_n[idx], self.last_force_n[idx], self.started[idx],
-            self.log_gain[idx],
+            self.log_gain[idx], self.last_reading_n[idx],
         )  # fmt: skip
 
 
@@ -166,7 +168,7 @@ class CurveSet:
         if self.dynamic:
             fresh = valid & ~started
             z1, z2, play, held = state.z1, state.z2, state.play_n, np.maximum(state.last_force_n, 0.0)
-            u = state.log_gain
+            u, x_held = state.log_gain, np.maximum(state.last_reading_n, 0.0)
             if fresh.any():  # the equilibrium at the first load (``drift``)
                 f0 = np.array(
                     [equilibrium_force_n(v, c.drift) if m else 0.0
@@ -174,7 +176,8 @@ class CurveSet:
                 )  # fmt: skip
                 z1 = np.where(fresh, self.a1 * f0, z1)
                 z2 = np.where(fresh, self.a2 * f0, z2)
-                u = np.where(fresh, self.cs * f0, u)
+                x_held = np.where(fresh, np.maximum(np.where(fresh, x, 0.0), 0.0), x_held)
+                u = np.where(fresh, self.cs * x_held, u)
                 play = np.where(fresh[:, None], np.where(fresh, x, 0.0)[:, None], play)
                 held = np.where(fresh, f0, held)
             dt = max(float(dt_s), 0.0) if math.isfinite(dt_s) else 0.0
@@ -185,7 +188,7 @@ class CurveSet:
             z1 = t1 + (z1 - t1) * e1
             z2 = t2 + (z2 - t2) * e2
             if self.sensitive:
-                tu = self.cs * held
+                tu = self.cs * x_held
                 u = tu + (u - tu) * np.exp(-dt / np.where((tu - u) * self.signs > 0.0, self.taus, self.recs))
             widths = self.play_widths
             xs = x[:, None]
@@ -201,7 +204,8 @@ class CurveSet:
         with np.errstate(invalid="ignore"):
             extrapolated = ~invalid & ~no_contact & ((force < self.low) | (force > self.high))
         new_held = np.where(invalid, state.last_force_n, force)
-        return force, status, x, extrapolated, CurveState(z1, z2, play, new_held, started | valid, u)
+        reading = np.where(valid, x, state.last_reading_n)
+        return force, status, x, extrapolated, CurveState(z1, z2, play, new_held, started | valid, u, reading)
 
 
 def track_series(
@@ -233,19 +237,21 @@ def track_series(
         else [0.0] * x.size
     )
     out = [0.0] * x.size
-    z1 = z2 = held = u = 0.0
+    z1 = z2 = held = u = x_held = 0.0
     started = from_rest
     for k, xk in enumerate(x.tolist()):
         if not started and xk == xk:
             held = equilibrium_force_n(xk, d)
-            z1, z2, u, started = a1 * held, a2 * held, c * held, True
-        t1, t2, tu = a1 * held, a2 * held, c * held
+            x_held = max(xk, 0.0)
+            z1, z2, u, started = a1 * held, a2 * held, c * x_held, True
+        t1, t2, tu = a1 * held, a2 * held, c * x_held
         z1 = t1 + (z1 - t1) * (e1u[k] if (t1 - z1) * a1 > 0.0 else e1d[k])
         z2 = t2 + (z2 - t2) * (e2u[k] if (t2 - z2) * a2 > 0.0 else e2d[k])
         u = tu + (u - tu) * (esu[k] if (tu - u) * c > 0.0 else esd[k])
         if xk != xk:  # NaN: invalid, the held force stays
             out[k] = xk
             continue
+        x_held = max(xk, 0.0)
         f = (xk - z1 - z2) / ((1.0 + beta * s[k]) * math.exp(u))
         if f <= floor:
             f = 0.0
