@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "EDGE_FRACTION",
+    "EDGE_GUARD_S",
     "HOLD_TOLERANCE_FS",
     "MIN_HOLD_S",
     "DriftGroups",
@@ -49,6 +50,10 @@ MIN_HOLD_S: Final = 3.0
 HOLD_TOLERANCE_FS: Final = 0.02
 #: The part of a hold's rows at its start and at its end that ``Hold.edges`` gives.
 EDGE_FRACTION: Final = 0.1
+#: ``hold_drifts`` leaves out this long at each end of a hold (s): a reference interpolated onto
+#: the meter's times lags the resistance (about 0.4 s on the real FSR bench records), so the
+#: sensor has already left a hold's load while the reference still reads it.
+EDGE_GUARD_S: Final = 0.5
 
 
 @dataclass(frozen=True)
@@ -191,7 +196,8 @@ def hold_drifts(
 ) -> tuple[HoldDrift, ...]:
     """Every hold's drift (module docstring) measured on ``rows`` (default: all): a hold is
     cut to its settled rows, then to its longest run of measured rows, which must last
-    ``MIN_HOLD_S``. ``holds``: the reference's holds when already found."""
+    ``MIN_HOLD_S``, less ``EDGE_GUARD_S`` at each end. ``holds``: the reference's holds when
+    already found."""
     t = np.asarray(time_s, dtype=np.float64)
     ref = np.asarray(reference_n, dtype=np.float64)
     err = np.asarray(force_n, dtype=np.float64) - ref
@@ -216,6 +222,10 @@ def hold_drifts(
         a, b = s.start + int(starts[k]), s.start + int(stops[k])
         if t[b - 1] - t[a] < MIN_HOLD_S:
             continue
+        inner = np.flatnonzero((t[a:b] >= t[a] + EDGE_GUARD_S) & (t[a:b] <= t[b - 1] - EDGE_GUARD_S))
+        if inner.size < 2:
+            continue
+        a, b = a + int(inner[0]), a + int(inner[-1]) + 1
         part = Hold(a, b, float(t[a]), float(t[b - 1]), s.level_n)
         first, last = part.edges()
         out.append(HoldDrift(part, after_higher, _mean(err[first]), _mean(err[last])))

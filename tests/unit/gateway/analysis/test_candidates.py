@@ -272,9 +272,9 @@ def test_rank_candidates_by_kind_and_form() -> None:
 
 def test_hold_drift_by_hand() -> None:
     """Two holds: 2 N for 10 s with an error rising 0.05 N/s, then 1 N with a constant error.
-    101 rows in the first: 10 per edge, mean error 0.05 x 0.45 = 0.0225 N at the start and
-    0.05 x 9.55 = 0.4775 N at the end: a change of 0.455 N, of a 4 N full scale 11.375 %; the
-    second, right after a higher load, changes 0."""
+    The first without its first and last 0.5 s (``EDGE_GUARD_S``): 91 rows, 9 per edge, mean
+    error 0.05 x 0.9 = 0.045 N at the start and 0.05 x 9.1 = 0.455 N at the end: a change of
+    0.41 N, of a 4 N full scale 10.25 %; the second, right after a higher load, changes 0."""
     t1 = np.round(np.arange(101) * 0.1, 10)
     t = np.concatenate([t1, 10.0 + np.arange(1, 21) * 0.5, 20.5 + t1])
     ref = np.concatenate([np.full(101, 2.0), np.zeros(20), np.full(101, 1.0)])
@@ -282,17 +282,17 @@ def test_hold_drift_by_hand() -> None:
     rows = np.ones(t.size, dtype=bool)
     drifts = hold_drifts(t, ref, force, rows)
     assert [d.after_higher for d in drifts] == [False, True]
-    assert drifts[0].change_n == pytest.approx(0.455, rel=1e-9)
+    assert drifts[0].change_n == pytest.approx(0.41, rel=1e-9)
     assert drifts[1].start_error_n == pytest.approx(0.3, rel=1e-12)
     assert drifts[1].change_n == pytest.approx(0.0)
     groups = drift_groups_pct(drifts, 4.0)
-    assert groups.others_pct_fs == pytest.approx(100 * 0.455 / 4, rel=1e-9)
+    assert groups.others_pct_fs == pytest.approx(100 * 0.41 / 4, rel=1e-9)
     assert groups.after_higher_pct_fs == pytest.approx(0.0, abs=1e-9)
     assert (groups.after_higher_holds, groups.other_holds) == (1, 1)
     # a hold measured on part of its rows: its longest run of them, if it lasts MIN_HOLD_S
-    rows[:60] = False  # the first hold keeps rows 60..100: 4 s, 4 rows per edge, 3.7 s apart
+    rows[:60] = False  # rows 60..100 (4 s); 6.5-9.5 s after the guard: 3 rows per edge, 2.8 s apart
     first = hold_drifts(t, ref, force, rows)[0]
-    assert first.hold.start == 60 and first.change_n == pytest.approx(0.05 * 3.7, rel=1e-9)
+    assert first.hold.start == 65 and first.change_n == pytest.approx(0.05 * 2.8, rel=1e-9)
     rows[:80] = False  # 2 s left: no longer a hold to measure
     assert len(hold_drifts(t, ref, force, rows)) == 1
     # no hold left: NaN
