@@ -24,9 +24,9 @@ The apparent force x (N) a static curve reads moves away from the applied force 
   force: with c < 0 an element on the estimate feeds back (a larger estimate lowers the
   sensitivity, which raises the estimate) and, above a reading of 1 / (e |c|), runs away.
   Where z_i adds a force that scales with the load (the same newtons at any later load until
-  it has recovered), u scales the reading: an FSR whose conductance falls by 40 % under a held
-  25 N (c < 0) reads a following 3.3 N hold 40 % low at first, about 1.3 N, not 10 N, and
-  recovers towards it as the polymer relaxes back (the real records, docs/calibration.md);
+  it has recovered), u scales the reading: a sensor whose sensitivity fell by a third under a
+  held high load (c < 0) reads a following low hold a third low at first, not a fixed number of
+  newtons off, and recovers towards it as the polymer relaxes back;
 * s, hysteresis (Preisach-style): play operators of widths c_j w (N, c_j in ``PLAY_SHARES``) on
   the apparent force, p_j <- clip(p_j, x - c_j w, x + c_j w), s = mean_j (p_j - x) / (c_j w)
   in [-1, 1]: -1 while loading, +1 while unloading. The play follows the reading x, not the
