@@ -89,13 +89,18 @@ force_reference_address = 1000
 LivePoll = tuple[float, tuple[str, ...], tuple[float, ...], tuple[float, ...]]
 
 
-async def _record_live(tmp_path: Path) -> tuple[Path, Path, list[LivePoll]]:
+async def _record_live(
+    tmp_path: Path, config_text: str | None = None, name: str = "live"
+) -> tuple[Path, Path, list[LivePoll]]:
     """Record through the live gateway; the record, the calibration and, per poll, the device
-    time, the channel names and the live tracked and static forces."""
+    time, the channel names and the live tracked and static forces. ``config_text``: the
+    gateway's configuration with ``{port}`` for the simulator's (default: ``_config_text``
+    naming the hand-written ``_calibration``)."""
     array = SimArray(ArrayConfig(channels=2, columns=2, seed=5, scenario="holds", speed=SPEED), 1)
     cal = tmp_path / "cal.toml"
-    cal.write_text(_calibration(gateway_params(array.channel_params)))
-    out = tmp_path / "live.csv"
+    if config_text is None:
+        cal.write_text(_calibration(gateway_params(array.channel_params)))
+    out = tmp_path / f"{name}.csv"
     polls: list[LivePoll] = []
     seen: set[float] = set()
     enough = asyncio.Event()
@@ -121,7 +126,10 @@ async def _record_live(tmp_path: Path) -> tuple[Path, Path, list[LivePoll]]:
 
     async with serve_tcp([array], host="127.0.0.1", port=0) as sim:
         cfg_path = tmp_path / "gateway.toml"
-        cfg_path.write_text(_config_text(sim.port, cal))
+        if config_text is None:
+            cfg_path.write_text(_config_text(sim.port, cal))
+        else:
+            cfg_path.write_text(config_text.replace("{port}", str(sim.port)))
         cfg_path.chmod(0o600)
         config = load_config(cfg_path)
         holder = SnapshotHolder()
@@ -140,6 +148,30 @@ async def _record_live(tmp_path: Path) -> tuple[Path, Path, list[LivePoll]]:
 
 def test_apply_on_a_recorded_file_gives_the_live_gateways_forces(tmp_path: Path) -> None:
     record_path, cal, polls = asyncio.run(_record_live(tmp_path))
+    _check_apply_equals_live(tmp_path, record_path, cal, polls)
+
+
+def test_calibrate_install_then_live_reads_what_apply_reads(tmp_path: Path) -> None:
+    """The README's path without a manual step: a record, ``calibrate --model curve --install``
+    into the gateway's configuration, the live gateway with it, and ``apply`` of the same
+    calibration to what it recorded: the same forces, to 1e-9 N."""
+    first, _, _ = asyncio.run(_record_live(tmp_path))
+    config = tmp_path / "installed.toml"
+    config.write_text(_config_text(65535, Path("none.toml")).replace('calibration = "none.toml"\n', ""))
+    cal = tmp_path / "written.toml"
+    args = ["calibrate", str(first), "--model", "curve", "--out", str(cal), "--install", str(config)]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    text = config.read_text()
+    assert 'calibration = "written.toml"' in text and "[curve." in cal.read_text()
+    live_text = text.replace("port = 65535", "port = {port}")
+    record_path, _, polls = asyncio.run(_record_live(tmp_path, live_text, "installed-live"))
+    _check_apply_equals_live(tmp_path, record_path, cal, polls, creeps=False)
+
+
+def _check_apply_equals_live(
+    tmp_path: Path, record_path: Path, cal: Path, polls: list[LivePoll], creeps: bool = True
+) -> None:
     assert len(polls) >= MIN_POLLS, f"only {len(polls)} polls recorded"
     assert polls[-1][0] >= END_DEVICE_S, f"the device reached only {polls[-1][0]} s"
 
@@ -181,5 +213,6 @@ def test_apply_on_a_recorded_file_gives_the_live_gateways_forces(tmp_path: Path)
     channel = np.array([row[col["channel"]] for row in body])
     ch00 = channel == "ch00"
     assert np.count_nonzero(ch00 & (ref == 0.5)) >= 10
-    assert float(np.nanmax(np.abs(a[ch00] - s[ch00]))) > 0.01
+    if creeps:
+        assert float(np.nanmax(np.abs(a[ch00] - s[ch00]))) > 0.01
     assert np.isfinite(a[~ch00 & (ref > 0)]).all()
