@@ -168,6 +168,8 @@ class Problem:
         self.penalty = scale  # a force error of full scale where the model is undefined
         self.step = force_step(data.force_n + offset)
         self._histories: OrderedDict[tuple[float, bool], ForceSeries] = OrderedDict()
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.log_measured = np.log(data.resistance_ohm)
 
     def params(self, x: FloatArray) -> SensorParams:
         values = {}
@@ -217,8 +219,10 @@ class Problem:
     def model_ohm(self, params: SensorParams, offset: float | None = None, up: bool = False) -> FloatArray:
         """The model's resistance on every row, driven by the record's force history plus the
         offset (and plus the sensitivity's ``step`` when ``up``)."""
-        history = self._history(self.offset0 if offset is None else offset, up)
-        return np.asarray(SensorModel(self.effects, params).total_ohm(history, self.temp)[:, 0])
+        return self._ohm(SensorModel(self.effects, params), self.offset0 if offset is None else offset, up)
+
+    def _ohm(self, model: SensorModel, offset: float, up: bool) -> FloatArray:
+        return np.asarray(model.total_ohm(self._history(offset, up), self.temp)[:, 0])
 
     def _history(self, offset: float, up: bool) -> ForceSeries:
         """The force history at this offset (stepped up or not): the last few are kept, with the
@@ -235,7 +239,8 @@ class Problem:
 
     def log_residual(self, params: SensorParams, offset: float | None = None) -> FloatArray:
         """ln R_measured - ln R_model on every row (NaN where either side is not finite)."""
-        return log_ratio(self.data.resistance_ohm, self.model_ohm(params, offset))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return _finite_or_nan(self.log_measured - np.log(self.model_ohm(params, offset)))
 
     def residual(self, x: FloatArray) -> FloatArray:
         try:
@@ -248,17 +253,21 @@ class Problem:
         return np.asarray(np.nan_to_num(res, nan=10.0) * self.weight)
 
     def _force_residual(self, params: SensorParams, offset: float) -> FloatArray:
-        model = self.model_ohm(params, offset)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            base = np.log(model)
-            up = np.log(self.model_ohm(params, offset, up=True))
-        log_res = log_ratio(self.data.resistance_ohm, model)
+        sensor = SensorModel(self.effects, params)
         t = self.train
-        res = force_residual(log_res[t], base[t], up[t], self.step[t], self.floor)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            base = np.log(self._ohm(sensor, offset, False)[t])
+            up = np.log(self._ohm(sensor, offset, True)[t])
+            log_res = _finite_or_nan(self.log_measured[t] - base)
+        res = force_residual(log_res, base, up, self.step[t], self.floor)
         return np.asarray(np.nan_to_num(res, nan=self.penalty, posinf=self.penalty, neginf=-self.penalty))
 
 
 def log_ratio(measured: FloatArray, model: FloatArray) -> FloatArray:
+    """ln measured - ln model, NaN where it is not finite."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        res = np.log(measured) - np.log(model)
-    return np.asarray(np.where(np.isfinite(res), res, np.nan))
+        return _finite_or_nan(np.log(measured) - np.log(model))
+
+
+def _finite_or_nan(x: FloatArray) -> FloatArray:
+    return np.asarray(np.where(np.isfinite(x), x, np.nan))

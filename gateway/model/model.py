@@ -15,6 +15,7 @@ new force is *recorded* into the state (it becomes the held force and moves the 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -54,11 +55,15 @@ class SensorModel:
         self.evaluator = ResistanceEvaluator(
             self.tunneling, sub["contact"], sub["series_resistance"], sub["leakage"]
         )
-        self.inverter = Inverter(self.evaluator, self.params)
         #: the active state-carrying effects, in canonical order
         self.state_effects: tuple[StrainState, ...] = tuple(
             s for s in sub.values() if isinstance(s, StrainState) and s.active
         )
+
+    @cached_property
+    def inverter(self) -> Inverter:
+        """The force inversion (built on first use: a fit's forward runs never need it)."""
+        return Inverter(self.evaluator, self.params)
 
     # ----------------------------------------------------------------- structure
     def has(self, effect: str) -> bool:

@@ -117,18 +117,20 @@ class SensorParams:
     force_max_n: float = 10.0
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
+        for name, allowed in _CHECKS:
+            value = number = getattr(self, name)
+            if type(value) is not float:  # a float is kept as it is (a fit builds thousands)
+                if isinstance(value, bool) or not isinstance(value, int | float):
+                    raise ParameterError(
+                        f"parameter {name} must be a number, got {type(value).__name__} {value!r}"
+                    )
+                number = float(value)
+            if not allowed.contains(number):
                 raise ParameterError(
-                    f"parameter {f.name} must be a number, got {type(value).__name__} {value!r}"
+                    f"parameter {name} = {value!r} is outside its allowed range {allowed.describe()}"
                 )
-            allowed = PARAMETER_RANGES[f.name]
-            if not allowed.contains(float(value)):
-                raise ParameterError(
-                    f"parameter {f.name} = {value!r} is outside its allowed range {allowed.describe()}"
-                )
-            object.__setattr__(self, f.name, float(value))
+            if number is not value:
+                object.__setattr__(self, name, number)
         if self.force_min_n >= self.force_max_n:
             raise ParameterError(
                 f"force_min_n ({self.force_min_n:g} N) must be below force_max_n ({self.force_max_n:g} N)"
@@ -173,9 +175,15 @@ class SensorParams:
         return "\n".join(lines) + "\n"
 
 
+#: every parameter's name and allowed range, in declaration order
+_CHECKS: tuple[tuple[str, Interval], ...] = tuple(
+    (f.name, PARAMETER_RANGES[f.name]) for f in fields(SensorParams)
+)
+
+
 def parameter_names() -> list[str]:
     """Names of all sensor parameters, in declaration order."""
-    return [f.name for f in fields(SensorParams)]
+    return [name for name, _ in _CHECKS]
 
 
 def _check_names(table: Mapping[str, Any]) -> None:
@@ -224,12 +232,9 @@ class ChannelParams:
         items = [sensors] if isinstance(sensors, SensorParams) else list(sensors)
         if not items:
             raise ParameterError("at least one channel is required")
-        return cls(
-            **{
-                name: np.array([getattr(s, name) for s in items], dtype=np.float64)
-                for name in parameter_names()
-            }
-        )
+        names = parameter_names()
+        table = np.array([[getattr(s, name) for s in items] for name in names], dtype=np.float64)
+        return cls(**dict(zip(names, table, strict=True)))
 
     @property
     def n_channels(self) -> int:

@@ -6,8 +6,9 @@ earlier one in one or two parameters only (a finite-difference Jacobian moves on
 ``ForceSeries`` holds the history as the model reads it (forces >= 0, the force held before
 each sample, the time steps, the contact term's sqrt F) and remembers the last few strain
 series of each state-carrying effect by the values of the parameters that series reads
-(``StrainState.series_parameters``): a parameter set that changes, say, only R0 or the
-contact's resistivity reuses the creep and hysteresis series instead of solving them again.
+(``StrainState.series_parameters``): a parameter set that changes, say, only R0, the
+contact's resistivity or the hysteresis strain reuses the creep series and the hysteresis's
+load direction instead of solving them again.
 A reused series is the very array a new solve would give, so the resistance is the same bit
 for bit.
 """
@@ -69,14 +70,16 @@ class ForceSeries:
 
     def solve(self, effect: StrainState) -> tuple[FloatArray | None, StateChanges]:
         """``effect.series`` over this history: its strain before each sample and its fields at
-        the end, reused when the parameters it reads have not changed since one of the last
-        ``KEPT_SERIES`` solves. The arrays are shared: callers must not write into them."""
+        the end. Its ``state_series`` is reused when the parameters it reads have not changed
+        since one of the last ``KEPT_SERIES`` solves. The arrays may be shared: callers must not
+        write into them."""
         p = effect.params
         key = (type(effect), *(getattr(p, name).tobytes() for name in effect.series_parameters))
         found = self._solved.pop(key, None)
         if found is None:
-            found = effect.series(self.force_n, self.held_n, self.dt_s, self.state0)
+            found = effect.state_series(self.force_n, self.held_n, self.dt_s, self.state0)
         self._solved[key] = found
         if len(self._solved) > KEPT_SERIES:
             self._solved.popitem(last=False)
-        return found
+        path, end = found
+        return (None if path is None else effect.path_strain(path)), end

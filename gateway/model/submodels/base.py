@@ -76,8 +76,8 @@ class StrainState(Submodel):
     #: the ``ModelState`` fields this effect owns, and its name in ``ResistanceBreakdown``
     fields: ClassVar[tuple[str, ...]] = ()
     term: ClassVar[str]
-    #: every ``ChannelParams`` field that ``series`` reads: equal values give the same series
-    #: (``ForceSeries`` reuses it; a field missing here would reuse a stale one)
+    #: every ``ChannelParams`` field that ``state_series`` reads: equal values give the same
+    #: series (``ForceSeries`` reuses it; a field missing here would reuse a stale one)
     series_parameters: ClassVar[tuple[str, ...]] = ()
 
     def strain(self, state: ModelState) -> FloatArray | None:
@@ -98,7 +98,21 @@ class StrainState(Submodel):
         """Over a series (T, N): the strain before each sample (relaxed, not yet recording
         it), and the owned fields at the end (after the last sample's relax for time-driven
         state, after its record for force-driven state)."""
+        path, end = self.state_series(force_n, held_n, dt_s, state0)
+        return (None if path is None else self.path_strain(path)), end
+
+    def state_series(
+        self, force_n: FloatArray, held_n: FloatArray, dt_s: FloatArray, state0: ModelState
+    ) -> tuple[FloatArray | None, StateChanges]:
+        """``series`` before its last step: the state variable the strain is made of, before
+        each sample (None: none), and the owned fields at the end. The costly part; it reads
+        the parameters of ``series_parameters`` only."""
         return None, {}
+
+    def path_strain(self, path: FloatArray) -> FloatArray:
+        """The strain from ``state_series``'s path, as ``strain`` makes it from a state (by
+        default the path is the strain)."""
+        return path
 
     def held_step(self, force_n: FloatArray, time_s: FloatArray) -> FloatArray | None:
         """The strain ``time_s`` after a step to ``force_n`` from rest (None: none)."""

@@ -41,7 +41,7 @@ class Creep(StrainState):
         log_a, target = self._log_decay(held_n, dt_s)
         return {"kv1_strain": np.asarray(target + (state.kv1_strain - target) * np.exp(log_a))}
 
-    def series(
+    def state_series(
         self, force_n: FloatArray, held_n: FloatArray, dt_s: FloatArray, state0: ModelState
     ) -> tuple[FloatArray | None, StateChanges]:
         log_a, target = self._log_decay(held_n, dt_s)

@@ -34,7 +34,7 @@ class Creep2(StrainState):
         decay = np.exp(-p.e2_pa * np.asarray(dt_s) / p.mu2_pa_s)
         return {"kv2_strain": np.asarray(target + (state.kv2_strain - target) * decay)}
 
-    def series(
+    def state_series(
         self, force_n: FloatArray, held_n: FloatArray, dt_s: FloatArray, state0: ModelState
     ) -> tuple[FloatArray | None, StateChanges]:
         p = self.params

@@ -29,7 +29,7 @@ class Hysteresis(StrainState):
     parameters: ClassVar[tuple[str, ...]] = ("hysteresis_strain", "hysteresis_force_n")
     fields: ClassVar[tuple[str, ...]] = ("play_n", "direction")
     term: ClassVar[str] = "hysteresis_strain"
-    series_parameters: ClassVar[tuple[str, ...]] = parameters
+    series_parameters: ClassVar[tuple[str, ...]] = ("hysteresis_force_n",)
 
     def strain(self, state: ModelState) -> FloatArray | None:
         return np.asarray(-self.params.hysteresis_strain * state.direction)
@@ -43,15 +43,19 @@ class Hysteresis(StrainState):
         direction = np.sign(move) * (1.0 - a) + state.direction * a
         return {"play_n": np.asarray(new_play), "direction": np.asarray(direction)}
 
-    def series(
+    def state_series(
         self, force_n: FloatArray, held_n: FloatArray, dt_s: FloatArray, state0: ModelState
     ) -> tuple[FloatArray | None, StateChanges]:
+        """The direction before each sample (it depends on F_h, not on h)."""
         f_h = self.params.hysteresis_force_n
         play = play_series(force_n, HYSTERESIS_DEAD_BAND * f_h, state0.play_n)  # after recording F[k]
         move = np.diff(np.vstack([state0.play_n[None, :], play]), axis=0)
         after, _ = relax_series(-np.abs(move) / f_h, np.sign(move), state0.direction)
         before = np.vstack([state0.direction[None, :], after[:-1]])
-        return -self.params.hysteresis_strain * before, {"play_n": play[-1], "direction": after[-1]}
+        return before, {"play_n": play[-1], "direction": after[-1]}
+
+    def path_strain(self, path: FloatArray) -> FloatArray:
+        return np.asarray(-self.params.hysteresis_strain * path)
 
     def held_step(self, force_n: FloatArray, time_s: FloatArray) -> FloatArray | None:
         p = self.params

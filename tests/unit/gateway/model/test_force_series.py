@@ -53,22 +53,35 @@ def test_a_state_series_changes_with_its_series_parameters_and_with_nothing_else
     kind: type[StrainState],
 ) -> None:
     force, t = _history()
-    history = ForceSeries.of(force[:, None], t, 1)
+    h = ForceSeries.of(force[:, None], t, 1)
     base = SensorParams()
-    strain0 = kind(ChannelParams.stack(base)).series(
-        history.force_n, history.held_n, history.dt_s, history.state0
-    )[0]
-    assert strain0 is not None
+    path0 = kind(ChannelParams.stack(base)).state_series(h.force_n, h.held_n, h.dt_s, h.state0)[0]
+    assert path0 is not None
     for name in parameter_names():
-        other = kind(ChannelParams.stack(_scaled(base, name, 1.5)))
-        strain = other.series(history.force_n, history.held_n, history.dt_s, history.state0)[0]
-        assert strain is not None
+        effect = kind(ChannelParams.stack(_scaled(base, name, 1.5)))
+        path, end = effect.state_series(h.force_n, h.held_n, h.dt_s, h.state0)
+        assert path is not None
         if name in kind.series_parameters:
-            assert not np.array_equal(strain, strain0), f"{kind.__name__}: {name} changes nothing"
+            assert not np.array_equal(path, path0), f"{kind.__name__}: {name} changes nothing"
         else:
-            assert np.array_equal(strain, strain0), (
-                f"{kind.__name__} reads {name}: add it to series_parameters"
-            )
+            assert np.array_equal(path, path0), f"{kind.__name__} reads {name}: add it to series_parameters"
+        # series is the two steps: the path, then the strain made from it
+        strain, end_again = effect.series(h.force_n, h.held_n, h.dt_s, h.state0)
+        assert strain is not None and end_again.keys() == end.keys()
+        assert np.array_equal(strain, effect.path_strain(path))
+
+
+def test_the_hysteresis_strain_is_minus_h_times_the_load_direction() -> None:
+    # one step up from rest to 5 N with F_h = 0.5 N: the play moves 4.95 N, the direction goes to
+    # 1 - exp(-9.9) and the strain before the next sample is -h times that
+    params = ChannelParams.stack(SensorParams(hysteresis_strain=1e-3, hysteresis_force_n=0.5))
+    h = ForceSeries.of(np.array([[5.0], [5.0]]), np.array([0.0, 1.0]), 1)
+    strain, end = Hysteresis(params).series(h.force_n, h.held_n, h.dt_s, h.state0)
+    assert strain is not None
+    assert strain[:, 0] == pytest.approx([0.0, -1e-3 * (1.0 - np.exp(-9.9))], rel=1e-12)
+    assert end["play_n"][0] == pytest.approx(4.95) and end["direction"][0] == pytest.approx(
+        1.0 - np.exp(-9.9)
+    )
 
 
 def test_a_model_driven_through_one_history_reads_as_simulate_one_parameter_at_a_time() -> None:
