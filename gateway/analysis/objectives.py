@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -170,6 +169,9 @@ class Problem:
         self._histories: OrderedDict[tuple[float, bool], ForceSeries] = OrderedDict()
         with np.errstate(divide="ignore", invalid="ignore"):
             self.log_measured = np.log(data.resistance_ohm)
+        self._rows = np.flatnonzero(self.train)  # the training rows, as indices
+        self._log_measured_train = self.log_measured[self._rows]
+        self._step_train = self.step[self._rows]
 
     def params(self, x: FloatArray) -> SensorParams:
         values = {}
@@ -180,7 +182,7 @@ class Problem:
                 values[name] = float(xi) * LINEAR_PARAMETERS[name]
             else:
                 values[name] = getattr(self.prior, name) * math.exp(float(xi))
-        return replace(self.prior, **values)
+        return self.prior.replaced(values)
 
     def offset(self, x: FloatArray) -> float:
         """The reference zero offset at x (the fixed starting value when it is not fitted)."""
@@ -247,20 +249,24 @@ class Problem:
             params, offset = self.params(x), self.offset(x)
             if self.objective is Objective.FORCE:
                 return self._force_residual(params, offset)
-            res = self.log_residual(params, offset)[self.train]
+            ohm = self.model_ohm(params, offset)[self._rows]
         except ValueError:
-            return np.full(int(np.count_nonzero(self.train)), 1e3)
-        return np.asarray(np.nan_to_num(res, nan=10.0) * self.weight)
+            return np.full(self._rows.size, 1e3)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            res = self._log_measured_train - np.log(ohm)
+        # a row where either side is not finite costs 10 (np.nan_to_num of its NaN, in effect)
+        return np.asarray(np.where(np.isfinite(res), res, 10.0) * self.weight)
 
     def _force_residual(self, params: SensorParams, offset: float) -> FloatArray:
         sensor = SensorModel(self.effects, params)
-        t = self.train
+        rows = self._rows
         with np.errstate(divide="ignore", invalid="ignore"):
-            base = np.log(self._ohm(sensor, offset, False)[t])
-            up = np.log(self._ohm(sensor, offset, True)[t])
-            log_res = _finite_or_nan(self.log_measured[t] - base)
-        res = force_residual(log_res, base, up, self.step[t], self.floor)
-        return np.asarray(np.nan_to_num(res, nan=self.penalty, posinf=self.penalty, neginf=-self.penalty))
+            base = np.log(self._ohm(sensor, offset, False)[rows])
+            up = np.log(self._ohm(sensor, offset, True)[rows])
+            log_res = _finite_or_nan(self._log_measured_train - base)
+        res = force_residual(log_res, base, up, self._step_train, self.floor)
+        # undefined (NaN) or infinite: a force error of full scale, of the infinity's sign
+        return np.asarray(np.where(np.isfinite(res), res, np.where(res < 0.0, -self.penalty, self.penalty)))
 
 
 def log_ratio(measured: FloatArray, model: FloatArray) -> FloatArray:

@@ -118,23 +118,26 @@ class SensorParams:
 
     def __post_init__(self) -> None:
         for name, allowed in _CHECKS:
-            value = number = getattr(self, name)
-            if type(value) is not float:  # a float is kept as it is (a fit builds thousands)
-                if isinstance(value, bool) or not isinstance(value, int | float):
-                    raise ParameterError(
-                        f"parameter {name} must be a number, got {type(value).__name__} {value!r}"
-                    )
-                number = float(value)
-            if not allowed.contains(number):
-                raise ParameterError(
-                    f"parameter {name} = {value!r} is outside its allowed range {allowed.describe()}"
-                )
+            value = getattr(self, name)
+            number = _checked(name, value, allowed)
             if number is not value:
                 object.__setattr__(self, name, number)
-        if self.force_min_n >= self.force_max_n:
-            raise ParameterError(
-                f"force_min_n ({self.force_min_n:g} N) must be below force_max_n ({self.force_max_n:g} N)"
-            )
+        _check_force_range(self.force_min_n, self.force_max_n)
+
+    def replaced(self, values: Mapping[str, float]) -> SensorParams:
+        """``dataclasses.replace(self, **values)``, with the same checks and errors, without its
+        overhead (a fit builds thousands): only the new values are checked, the others were
+        when ``self`` was built."""
+        fields_ = dict(self.__dict__)
+        for name, value in values.items():
+            allowed = PARAMETER_RANGES.get(name)
+            if allowed is None:
+                raise TypeError(f"SensorParams has no parameter {name!r}")
+            fields_[name] = _checked(name, value, allowed)
+        _check_force_range(fields_["force_min_n"], fields_["force_max_n"])
+        out = object.__new__(SensorParams)
+        out.__dict__.update(fields_)
+        return out
 
     def with_overrides(self, overrides: Mapping[str, Any]) -> SensorParams:
         """Return a copy with the named values replaced (unknown names are an error)."""
@@ -175,15 +178,38 @@ class SensorParams:
         return "\n".join(lines) + "\n"
 
 
+def _checked(name: str, value: object, allowed: Interval) -> float:
+    """``value`` as a float, or a ``ParameterError`` saying why it is not a valid ``name``."""
+    if type(value) is float:  # kept as it is (a fit builds thousands)
+        number = value
+    elif isinstance(value, bool) or not isinstance(value, int | float):
+        raise ParameterError(f"parameter {name} must be a number, got {type(value).__name__} {value!r}")
+    else:
+        number = float(value)
+    if not allowed.contains(number):
+        raise ParameterError(
+            f"parameter {name} = {value!r} is outside its allowed range {allowed.describe()}"
+        )
+    return number
+
+
+def _check_force_range(force_min_n: float, force_max_n: float) -> None:
+    if force_min_n >= force_max_n:
+        raise ParameterError(f"force_min_n ({force_min_n:g} N) must be below force_max_n ({force_max_n:g} N)")
+
+
 #: every parameter's name and allowed range, in declaration order
 _CHECKS: tuple[tuple[str, Interval], ...] = tuple(
     (f.name, PARAMETER_RANGES[f.name]) for f in fields(SensorParams)
 )
 
 
+_NAMES: tuple[str, ...] = tuple(name for name, _ in _CHECKS)
+
+
 def parameter_names() -> list[str]:
     """Names of all sensor parameters, in declaration order."""
-    return [name for name, _ in _CHECKS]
+    return list(_NAMES)
 
 
 def _check_names(table: Mapping[str, Any]) -> None:
@@ -232,8 +258,11 @@ class ChannelParams:
         items = [sensors] if isinstance(sensors, SensorParams) else list(sensors)
         if not items:
             raise ParameterError("at least one channel is required")
-        names = parameter_names()
-        table = np.array([[getattr(s, name) for s in items] for name in names], dtype=np.float64)
+        names = _NAMES
+        if len(items) == 1:  # a fit's model, built thousands of times: one row per parameter
+            table = np.array([getattr(items[0], name) for name in names], dtype=np.float64).reshape(-1, 1)
+        else:
+            table = np.array([[getattr(s, name) for s in items] for name in names], dtype=np.float64)
         return cls(**dict(zip(names, table, strict=True)))
 
     @property

@@ -111,13 +111,13 @@ def relax_series(log_a: FloatArray, target: FloatArray, x0: FloatArray) -> tuple
     if n_t == 0:
         return minus_b, x0
     cum = np.cumsum(log_a, axis=0)
-    if n_t <= _BLOCK_ROWS and np.min(cum) >= -_BLOCK_LOG_DECAY and np.max(cum) <= _BLOCK_LOG_DECAY:
+    if n_t <= _BLOCK_ROWS and cum.min() >= -_BLOCK_LOG_DECAY and cum.max() <= _BLOCK_LOG_DECAY:
         decay = np.exp(cum, out=cum)  # one block: the whole series
         x = np.cumsum(np.divide(minus_b, decay, out=minus_b), axis=0, out=minus_b)
         np.subtract(x0, x, out=x)
         np.multiply(x, decay, out=x)
         return x, np.asarray(x[-1])
-    low, high = float(np.min(log_a)), float(np.max(log_a))
+    low, high = float(log_a.min()), float(log_a.max())
     peak = max(-low, high)
     if math.isnan(low + high):  # a NaN spoils its own channel only: size the blocks on the rest
         peak = float(np.fmax.reduce(np.abs(log_a), axis=None))
@@ -162,8 +162,11 @@ def _compose_affine(scale: FloatArray, offset: FloatArray) -> None:
     vectorized passes (Hillis-Steele); with 0 <= scale <= 1 nothing grows, so it cannot
     overflow however fast the decay."""
     shift = 1
-    while shift < scale.shape[0]:
-        np.add(offset[shift:], np.multiply(scale[shift:], offset[:-shift]), out=offset[shift:])
+    n = scale.shape[0]
+    carried = np.empty_like(offset)
+    while shift < n:
+        part = np.multiply(scale[shift:], offset[:-shift], out=carried[: n - shift])
+        np.add(offset[shift:], part, out=offset[shift:])
         np.multiply(scale[shift:], scale[:-shift], out=scale[shift:])
         shift *= 2
 
@@ -177,18 +180,20 @@ def play_series(force_n: FloatArray, radius_n: FloatArray, p0_n: FloatArray) -> 
     """
     lo = force_n - radius_n
     hi = force_n + radius_n
+    n = force_n.shape[0]
+    lo_new, hi_new = np.empty_like(lo), np.empty_like(hi)
     shift = 1
-    while shift < force_n.shape[0]:
-        lo_new = _clip(lo[:-shift], lo[shift:], hi[shift:])
-        hi_new = _clip(hi[:-shift], lo[shift:], hi[shift:])
-        lo[shift:], hi[shift:] = lo_new, hi_new
+    while shift < n:
+        _clip(lo[:-shift], lo[shift:], hi[shift:], out=lo_new[: n - shift])
+        _clip(hi[:-shift], lo[shift:], hi[shift:], out=hi_new[: n - shift])
+        lo[shift:], hi[shift:] = lo_new[: n - shift], hi_new[: n - shift]
         shift *= 2
     return _clip(np.asarray(p0_n, dtype=np.float64), lo, hi)
 
 
-def _clip(x: FloatArray, low: FloatArray, high: FloatArray) -> FloatArray:
+def _clip(x: FloatArray, low: FloatArray, high: FloatArray, out: FloatArray | None = None) -> FloatArray:
     """np.clip(x, low, high) of floats, min(max(x, low), high), without np.clip's Python-level
     overhead (measurable on the many short scans of a fit). On a tie (0.0 and -0.0) np.maximum
     and np.minimum keep their second argument, which is the bound, as np.clip does."""
-    out = np.maximum(x, low)
+    out = np.maximum(x, low, out=out)
     return np.asarray(np.minimum(out, high, out=out))

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from typing import Any
 
 import pytest
 
@@ -84,3 +86,26 @@ def test_channel_params_stack_and_unstack() -> None:
     assert set(parameter_names()) == set(stacked.__dataclass_fields__)
     with pytest.raises(ParameterError, match="at least one channel"):
         ChannelParams.stack([])
+
+
+def test_replaced_is_dataclasses_replace_with_the_same_checks() -> None:
+    base = SensorParams()
+    new = base.replaced({"r0_ohm": 1e5, "e0_pa": 2e7, "series_resistance_ohm": 0})
+    assert new == replace(base, r0_ohm=1e5, e0_pa=2e7, series_resistance_ohm=0)
+    assert type(new.series_resistance_ohm) is float and base.r0_ohm == 200e3  # base untouched
+    bads: list[dict[str, Any]] = [
+        {"r0_ohm": -1.0},
+        {"volume_fraction": math.pi / 6},
+        {"e0_pa": "1"},
+        {"e0_pa": True},
+    ]
+    for bad in bads:
+        with pytest.raises(ParameterError) as want:
+            replace(base, **bad)
+        with pytest.raises(ParameterError) as got:
+            base.replaced(bad)
+        assert str(got.value) == str(want.value)
+    with pytest.raises(ParameterError, match=r"force_min_n \(20 N\) must be below force_max_n \(10 N\)"):
+        base.replaced({"force_min_n": 20.0})
+    with pytest.raises(TypeError, match="r0"):
+        base.replaced({"r0": 1.0})
