@@ -105,7 +105,9 @@ class ResistanceEvaluator:
         contact: +inf (or R_leak with leakage). ``contact_root``: (F > 0, sqrt F there) when
         the caller has them (``ForceSeries.contact_root``)."""
         f = force_n
-        elastic, strain, polymer, contact, total = self._terms(f, state_strains, temp_factor, contact_root)
+        elastic, strain, polymer, contact, total = self._terms(
+            f, state_strains, temp_factor, self.elastic_of(f), self.contact_of(f, contact_root)
+        )
         shape = np.broadcast_shapes(f.shape, np.shape(total))
 
         def full(x: ArrayLike) -> FloatArray:
@@ -133,10 +135,13 @@ class ResistanceEvaluator:
         force_n: FloatArray,
         state_strains: dict[str, FloatArray],
         temp_factor: ArrayLike,
-        contact_root: tuple[NDArray[np.bool_], FloatArray] | None = None,
+        elastic: FloatArray,
+        contact: FloatArray,
     ) -> FloatArray:
-        """``breakdown(...).total_ohm`` (the same numbers) without the other terms' arrays."""
-        total = self._terms(force_n, state_strains, temp_factor, contact_root)[4]
+        """``breakdown(...).total_ohm`` (the same numbers) without the other terms' arrays, from
+        the terms that depend on the force alone: ``elastic_of(force_n)``, ``contact_of(force_n)``
+        (a fit keeps them while their parameters are unchanged)."""
+        total = self._terms(force_n, state_strains, temp_factor, elastic, contact)[4]
         shape = np.broadcast_shapes(force_n.shape, total.shape)
         if total.shape == shape and total.dtype == np.float64:
             return total
@@ -144,15 +149,31 @@ class ResistanceEvaluator:
         out[...] = total
         return out
 
+    def elastic_of(self, force_n: FloatArray) -> FloatArray:
+        """The elastic strain F / (A E0(F)) at forces clamped at 0 N."""
+        return self.elastic_strain(np.maximum(force_n, 0.0))
+
+    def contact_of(
+        self, force_n: FloatArray, contact_root: tuple[NDArray[np.bool_], FloatArray] | None = None
+    ) -> FloatArray:
+        """The contacts' k / sqrt(F) in ohm: +inf at F = 0 (open), 0 without contact.
+        ``contact_root``: (F > 0, sqrt F there) when the caller has them."""
+        positive, root = (force_n > 0.0, None) if contact_root is None else contact_root
+        with np.errstate(divide="ignore"):
+            if root is None:
+                root = np.sqrt(np.where(positive, force_n, 1.0))
+            contact = np.where(positive, self.contact_k / root, np.inf)
+        return np.asarray(np.where(self.contact_k > 0.0, contact, 0.0))
+
     def _terms(
         self,
         f: FloatArray,
         state_strains: dict[str, FloatArray],
         temp_factor: ArrayLike,
-        contact_root: tuple[NDArray[np.bool_], FloatArray] | None,
+        elastic: FloatArray,
+        contact: FloatArray,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         """elastic strain, total strain, polymer, contact and total resistance at forces f >= 0."""
-        elastic = self.elastic_strain(np.maximum(f, 0.0))
         strain = elastic
         if state_strains:
             terms = list(state_strains.values())
@@ -161,12 +182,6 @@ class ResistanceEvaluator:
                 state_strain = state_strain + term
             strain = elastic + state_strain
         polymer = polymer_resistance_ohm(np.asarray(temp_factor) * self.r0_ohm, strain, self.gamma_s0)
-        positive, root = (f > 0.0, None) if contact_root is None else contact_root
-        with np.errstate(divide="ignore"):
-            if root is None:
-                root = np.sqrt(np.where(positive, f, 1.0))
-            contact = np.where(positive, self.contact_k / root, np.inf)
-        contact = np.where(self.contact_k > 0.0, contact, 0.0)
         core = polymer + contact + self.series_ohm
         total = parallel(core, self.leak_ohm) if self.has_leak else core
         return elastic, strain, polymer, contact, np.asarray(total)

@@ -216,8 +216,10 @@ class SensorModel:
             strain = history.solve(effect)[0]
             if strain is not None:
                 strains[effect.term] = strain
-        temp = self._temperature_factor(temperature_c)
-        return self.evaluator.forward_ohm(history.force_n, strains, temp, history.contact_root())
+        ev, f = self.evaluator, history.force_n
+        elastic = history.term(("elastic", ev.a_e0, ev.a_e0_slope), lambda: ev.elastic_of(f))
+        contact = history.term(("contact", ev.contact_k), lambda: ev.contact_of(f, history.contact_root()))
+        return ev.forward_ohm(f, strains, self._temperature_factor(temperature_c), elastic, contact)
 
     # ------------------------------------------------------------------- inverse
     def invert(

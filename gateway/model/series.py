@@ -8,14 +8,16 @@ each sample, the time steps, the contact term's sqrt F) and remembers the last f
 series of each state-carrying effect by the values of the parameters that series reads
 (``StrainState.series_parameters``): a parameter set that changes, say, only R0, the
 contact's resistivity or the hysteresis strain reuses the creep series and the hysteresis's
-load direction instead of solving them again.
-A reused series is the very array a new solve would give, so the resistance is the same bit
-for bit.
+load direction instead of solving them again. The terms that depend on the force alone (the
+elastic strain, the contacts' k / sqrt F) are kept the same way, by the arrays they are made
+of. A reused array is the very one a new computation would give, so the resistance is the
+same bit for bit.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -41,6 +43,7 @@ class ForceSeries:
         self.held_n = np.maximum(np.vstack([state0.last_force_n[None, :], force_n[:-1]]), 0.0)
         self.dt_s = np.broadcast_to(dt_s.reshape(-1, 1), force_n.shape)
         self._root: tuple[BoolArray, FloatArray] | None = None
+        self._terms: dict[tuple[object, ...], FloatArray] = {}
         self._solved: OrderedDict[tuple[object, ...], tuple[FloatArray | None, StateChanges]] = OrderedDict()
 
     @classmethod
@@ -67,6 +70,19 @@ class ForceSeries:
             positive = self.force_n > 0.0
             self._root = positive, np.sqrt(np.where(positive, self.force_n, 1.0))
         return self._root
+
+    def term(self, key: tuple[str | FloatArray, ...], make: Callable[[], FloatArray]) -> FloatArray:
+        """A term of the resistance that depends on the force and on the arrays in ``key`` alone
+        (``key[0]`` names the term): ``make()``, or what it gave for equal arrays among the
+        last few terms. Shared: callers must not write into it."""
+        full = tuple(k.tobytes() if isinstance(k, np.ndarray) else k for k in key)
+        found = self._terms.pop(full, None)
+        if found is None:
+            found = make()
+        self._terms[full] = found
+        if len(self._terms) > 2 * KEPT_SERIES:
+            del self._terms[next(iter(self._terms))]
+        return found
 
     def solve(self, effect: StrainState) -> tuple[FloatArray | None, StateChanges]:
         """``effect.series`` over this history: its strain before each sample and its fields at

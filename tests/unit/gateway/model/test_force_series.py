@@ -92,6 +92,7 @@ def test_a_model_driven_through_one_history_reads_as_simulate_one_parameter_at_a
     effects = (*ALL_EFFECTS, "leakage")
     # a Jacobian's pattern: the base point, then each parameter moved alone, back to the base in between
     moved = ["r0_ohm", "e1_pa", "hysteresis_force_n", "mu2_pa_s", "rho2_ohm_m", "e1_slope_pa_per_n"]
+    moved += ["e0_pa", "area_m2", "hardness_pa", "hysteresis_strain", "series_resistance_ohm"]
     for params in [base, *(_scaled(base, name, 1.001) for name in moved), base]:
         model = SensorModel(effects, params)
         reused = model.total_ohm(history, temp)
