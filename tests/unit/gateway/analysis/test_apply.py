@@ -143,7 +143,8 @@ def test_a_line_calibration_reads_f_from_the_conductance_line(tmp_path: Path) ->
 
 def _hold_record() -> str:
     """0 N for two rows, 2 N for 20 rows (t = 1 ... 10.5 s), 0 N for two rows."""
-    hold_r = [6.25e4, 4e4] + [5e4] * 16 + [4e4, 1e5]  # with F = 1e5 / R: 1.6, 2.5, 2.0 ..., 2.5, 1.0
+    # with F = 1e5 / R: 1.6, 1.6, 2.5, 2.0 ..., 2.5, 1.0, 1.0
+    hold_r = [6.25e4, 6.25e4, 4e4] + [5e4] * 14 + [4e4, 1e5, 1e5]
     rows = [(0.0, "inf", 0.0), (0.5, "inf", 0.0)]
     rows += [(1.0 + 0.5 * k, repr(r), 2.0) for k, r in enumerate(hold_r)]
     rows += [(11.0, "inf", 0.0), (11.5, "inf", 0.0)]
@@ -157,14 +158,17 @@ def test_hold_start_and_end_errors_by_hand(tmp_path: Path) -> None:
     err = channel_errors(ch)
     assert err is not None
     (hold,) = err.holds
-    assert (hold.hold.start, hold.hold.stop, hold.hold.start_s, hold.hold.end_s) == (2, 22, 1.0, 10.5)
-    assert hold.edge_rows == 2  # 10 % of 20 rows
-    # first two rows: 1.6 - 2 and 2.5 - 2; last two: 2.5 - 2 and 1.0 - 2
-    assert hold.tracked_start_n == pytest.approx((-0.4 + 0.5) / 2)
-    assert hold.tracked_end_n == pytest.approx((0.5 - 1.0) / 2)
+    # the hold without 0.5 s at each end (``holds.EDGE_GUARD_S``): rows 3-20, 1.5-10 s
+    assert (hold.hold.start, hold.hold.stop, hold.hold.start_s, hold.hold.end_s) == (3, 21, 1.5, 10.0)
+    assert hold.edge_rows == 1  # 10 % of 18 rows
+    assert not hold.after_higher
+    # its first row: 1.6 - 2; its last: 1.0 - 2
+    assert hold.tracked_start_n == pytest.approx(-0.4)
+    assert hold.tracked_end_n == pytest.approx(-1.0)
     assert (hold.static_start_n, hold.static_end_n) == (hold.tracked_start_n, hold.tracked_end_n)
+    assert err.drift_tracked is not None and err.drift_tracked.others_pct_fs == pytest.approx(100 * 0.6 / 2.0)
     # RMS over all 24 rows (the four unloaded rows read 0 N: no error)
-    rms = math.sqrt((0.4**2 + 0.5**2 + 0.5**2 + 1.0**2) / 24)
+    rms = math.sqrt((2 * 0.4**2 + 2 * 0.5**2 + 2 * 1.0**2) / 24)
     assert err.overall.tracked_rms_n == pytest.approx(rms)
     assert err.overall.full_scale_n == 2.0
     assert err.overall.pct(err.overall.tracked_rms_n) == pytest.approx(100 * rms / 2.0)
@@ -172,8 +176,8 @@ def test_hold_start_and_end_errors_by_hand(tmp_path: Path) -> None:
     report = apply_report(applied, [err])
     (channel,) = report["channels"]
     assert channel["holds"][0]["tracked"] == {
-        "start_error_n": pytest.approx(0.05),
-        "end_error_n": pytest.approx(-0.25),
+        "start_error_n": pytest.approx(-0.4),
+        "end_error_n": pytest.approx(-1.0),
     }
     assert report["overall"]["tracked"]["rms_n"] == pytest.approx(rms)
 

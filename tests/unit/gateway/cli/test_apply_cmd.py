@@ -60,12 +60,12 @@ def test_apply_writes_the_record_with_tracked_static_and_status(
     assert tracked[:4] == [0.0, 0.0, 2.5, 2.0] and tracked[-1] == 0.0
     assert [r[6] for r in rows[1:4]] == ["no_contact", "no_contact", "ok"]
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    # the report: RMS over 16 rows with one error of 0.5 N; the hold (1.0-6.0 s, 11 rows) errs at
-    # its start by 0.5 N (first 10 % = 1 row) and not at its end
+    # the report: RMS over 16 rows with one error of 0.5 N, in the hold's first row (1.0 s); the
+    # hold is measured without 0.5 s at each end (1.5-5.5 s, 9 rows): no error at either edge
     rms = 0.5 / math.sqrt(16)
     assert f"{rms:.4f} ({100 * rms / 2.0:.2f} %)" in result.output
-    (hold_line,) = [line for line in result.output.splitlines() if line.startswith("tip ") and "1.00" in line]
-    assert hold_line.split() == ["tip", "1.00", "6.00", "2", "11", "+0.5000", "+0.0000", "+0.5000", "+0.0000"]
+    (hold_line,) = [line for line in result.output.splitlines() if line.startswith("tip ") and "1.50" in line]
+    assert hold_line.split() == ["tip", "1.50", "5.50", "2", "9", "+0.0000", "+0.0000", "+0.0000", "+0.0000"]
     assert f"wrote {out}" in result.output and f"wrote {png}" in result.output
 
 
@@ -81,8 +81,8 @@ def test_json_is_one_object_with_the_same_numbers(tmp_path: Path, files: tuple[P
     assert channel["errors"]["tracked"]["rms_n"] == pytest.approx(0.125)
     assert channel["errors"]["static"]["rms_pct_fs"] == pytest.approx(6.25)
     (hold,) = channel["holds"]
-    assert (hold["start_s"], hold["end_s"], hold["rows"], hold["edge_rows"]) == (1.0, 6.0, 11, 1)
-    assert hold["tracked"] == {"start_error_n": pytest.approx(0.5), "end_error_n": pytest.approx(0.0)}
+    assert (hold["start_s"], hold["end_s"], hold["rows"], hold["edge_rows"]) == (1.5, 5.5, 9, 1)
+    assert hold["tracked"] == {"start_error_n": pytest.approx(0.0), "end_error_n": pytest.approx(0.0)}
 
 
 def test_as_maps_a_record_channel_to_a_calibration_table(tmp_path: Path) -> None:
