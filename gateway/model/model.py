@@ -15,7 +15,7 @@ new force is *recorded* into the state (it becomes the held force and moves the 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,7 +39,9 @@ class SensorModel:
         effects: str | Iterable[str],
         params: SensorParams | Sequence[SensorParams] | ChannelParams,
     ) -> None:
-        self.effects: tuple[str, ...] = parse_effects(effects)
+        self.effects: tuple[str, ...] = (
+            _parsed(effects) if isinstance(effects, str | tuple) else parse_effects(effects)
+        )
         self.params = params if isinstance(params, ChannelParams) else ChannelParams.stack(params)
         self.submodels: dict[str, Submodel] = {}
         for name, (on, off) in EFFECTS.items():
@@ -312,6 +314,12 @@ class SensorModel:
             inv, state = self.track(r[k], state, dt[k], None if temps is None else temps[k])
             forces[k], status[k] = inv.force_n, inv.status
         return Inversion(forces, status), state
+
+
+@lru_cache(maxsize=64)
+def _parsed(effects: str | tuple[str, ...]) -> tuple[str, ...]:
+    """``parse_effects`` of a hashable effect list, kept (a fit builds a model per residual)."""
+    return parse_effects(effects)
 
 
 def _summed(strains: dict[str, FloatArray]) -> FloatArray | float:

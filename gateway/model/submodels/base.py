@@ -120,4 +120,5 @@ class StrainState(Submodel):
 
 
 def zeros_like(params: ChannelParams) -> FloatArray:
-    return np.zeros_like(params.r0_ohm)
+    """0.0 per channel."""
+    return np.zeros(params.r0_ohm.shape)

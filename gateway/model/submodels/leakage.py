@@ -35,4 +35,4 @@ class NoLeakage(ParallelPath):
 
     def __init__(self, params: ChannelParams) -> None:
         super().__init__(params)
-        self.ohm = np.full_like(params.r0_ohm, np.inf)
+        self.ohm = np.full(params.r0_ohm.shape, np.inf)
