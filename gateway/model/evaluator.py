@@ -15,6 +15,7 @@ on the hot paths (the ``has_*`` flags skip it).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -72,18 +73,34 @@ class ResistanceEvaluator:
     ) -> None:
         self.r0_ohm = tunneling.params.r0_ohm
         self.gamma_s0 = tunneling.gamma_s0
-        self.neg_gamma_s0 = -tunneling.gamma_s0
         self.a_e0 = tunneling.a_e0
         self.a_e0_slope = tunneling.a_e0_slope
         self.contact_k = contact.coefficient
         self.series_ohm = series.coefficient
         self.leak_ohm = leakage.ohm
-        self.has_contact = bool((self.contact_k > 0.0).any())
-        self.has_series = bool((self.series_ohm != 0.0).any())
         self.has_leak = bool(leakage.active and np.isfinite(self.leak_ohm).any())
-        # with an open contact at rest, +inf is the model's own reading of an unloaded sensor
-        self.open_at_rest = np.asarray((self.contact_k > 0.0) & np.isinf(self.leak_ohm))
-        self.closed_at_rest = ~self.open_at_rest
+
+    # the rest is for the inversion: a fit builds an evaluator per residual and never inverts
+    @cached_property
+    def neg_gamma_s0(self) -> FloatArray:
+        return np.asarray(-self.gamma_s0)
+
+    @cached_property
+    def has_contact(self) -> bool:
+        return bool((self.contact_k > 0.0).any())
+
+    @cached_property
+    def has_series(self) -> bool:
+        return bool((self.series_ohm != 0.0).any())
+
+    @cached_property
+    def open_at_rest(self) -> NDArray[np.bool_]:
+        """With an open contact at rest, +inf is the model's own reading of an unloaded sensor."""
+        return np.asarray((self.contact_k > 0.0) & np.isinf(self.leak_ohm))
+
+    @cached_property
+    def closed_at_rest(self) -> NDArray[np.bool_]:
+        return np.asarray(~self.open_at_rest)
 
     def elastic_strain(self, force_n: FloatArray) -> FloatArray:
         """F / (A E0(F)) for forces >= 0."""

@@ -125,7 +125,8 @@ def relax_series(log_a: FloatArray, target: FloatArray, x0: FloatArray) -> tuple
     if peak > 0.0:
         rows = max(1, int(min(_BLOCK_LOG_DECAY // peak, rows)))
     rows = -(-n_t // -(-n_t // rows))  # as many blocks, of equal size: the least padding
-    out = _relax_blocks(np.broadcast_to(log_a, minus_b.shape), minus_b, x0, rows)
+    full = log_a if log_a.shape == minus_b.shape else np.broadcast_to(log_a, minus_b.shape)
+    out = _relax_blocks(full, minus_b, x0, rows)
     return out, np.asarray(out[-1])
 
 
@@ -147,7 +148,7 @@ def _relax_blocks(log_a: FloatArray, minus_b: FloatArray, x0: FloatArray, rows: 
     block_decay = decay[:, -1].copy()
     block_end = np.multiply(decay[:, -1], x[:, -1])  # minus the end state from a zero start
     _compose_affine(block_decay, block_end)
-    x0_ch = np.broadcast_to(x0, shape[1:]).reshape(n_ch)
+    x0_ch = (x0 if x0.shape == shape[1:] else np.broadcast_to(x0, shape[1:])).reshape(n_ch)
     start = np.empty((n_blocks, 1, n_ch))
     start[0, 0] = x0_ch
     np.subtract(np.multiply(block_decay[:-1], x0_ch), block_end[:-1], out=start[1:, 0])
