@@ -11,6 +11,8 @@ plus the further effects named in ``docs/record-format.md``.
 * ``state``: the per-channel state the state-carrying effects own;
 * ``inversion``: force from resistance (statuses, Newton solvers);
 * ``model``: ``SensorModel``, which puts them together;
+* ``series``: ``ForceSeries``, a force history the model is driven with, which keeps what a
+  fit's many parameter sets do not change (the state effects' series, the force-only terms);
 * ``frontend``: the read-out front ends (``Divider``, the high-side divider of eq. 18;
   ``LowSideDivider``; ``Transimpedance``; ``RatioFrontEnd``, a divider of unknown values read
   in units of its reference resistor) with their ADC, both ways, and the factory by kind;
