@@ -170,18 +170,25 @@ class Problem:
         with np.errstate(divide="ignore", invalid="ignore"):
             self.log_measured = np.log(data.resistance_ohm)
         self._rows = np.flatnonzero(self.train)  # the training rows, as indices
+        #: per free name: fitted on a linear scale (value = x scale) or in log space (prior e^x)
+        self._scales = [
+            (
+                n,
+                n in LINEAR_PARAMETERS,
+                LINEAR_PARAMETERS[n] if n in LINEAR_PARAMETERS else getattr(prior, n, 0.0),
+            )
+            for n in names
+        ]
         self._log_measured_train = self.log_measured[self._rows]
         self._step_train = self.step[self._rows]
 
     def params(self, x: FloatArray) -> SensorParams:
         values = {}
-        for name, xi in zip(self.names, x, strict=True):
-            if name == OFFSET:
-                continue
-            if name in LINEAR_PARAMETERS:
-                values[name] = float(xi) * LINEAR_PARAMETERS[name]
-            else:
-                values[name] = getattr(self.prior, name) * math.exp(float(xi))
+        for (name, linear, scale), xi in zip(self._scales, x.tolist(), strict=True):
+            if linear:
+                values[name] = xi * scale
+            elif name != OFFSET:
+                values[name] = scale * math.exp(xi)
         return self.prior.replaced(values)
 
     def offset(self, x: FloatArray) -> float:
