@@ -190,7 +190,7 @@ def test_a_lookup_that_goes_below_zero_reads_no_contact_there() -> None:
     force, status = _read([lk, lk, lk], [1e3 * 10**0.25, math.sqrt(1e3 * 1e4), 1e3 * 10**0.75])
     assert status == ["ok", "no_contact", "no_contact"]
     np.testing.assert_allclose(force, [2.0, 0.0, 0.0], rtol=1e-12)
-    assert 1.0 / lk.unloaded_resistance_ohm == pytest.approx(1 / math.sqrt(1e3 * 1e4))
+    assert lk.unloaded_resistance_ohm == pytest.approx(math.sqrt(1e3 * 1e4))
 
 
 def test_channels_without_a_conversion_are_bitwise_unchanged() -> None:
@@ -233,7 +233,7 @@ def test_baseline_is_taken_off_before_the_line() -> None:
     snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
     assert [ChannelStatus(s).label for s in snap.status] == ["no_contact", "no_contact"]
     # the lookup's 0 N end: its last segment (2 N at 1e4, 0.5 N at 1e5) extended to 1e5 * 10^(1/3)
-    assert 1.0 / LOOKUP.unloaded_resistance_ohm == pytest.approx(1 / (1e5 * 10 ** (1 / 3)))
+    assert LOOKUP.unloaded_resistance_ohm == pytest.approx(1e5 * 10 ** (1 / 3))
     g_lookup = 1.0 / 1e4 + 1.0 / 2e5 - 1.0 / LOOKUP.unloaded_resistance_ohm
     raw = RawSample(resistance_ohm=np.array([loaded, 1.0 / g_lookup]))
     snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
