@@ -112,16 +112,20 @@ def outside_range_words(cal: Calibration) -> list[str]:
 
 def ranking_lines(cal: Calibration) -> list[str]:
     """Every calibration ranked on held-out force (the table of the report), with its held-out
-    hold drift in both groups; a dynamic calibration whose drift exceeds the best static
-    rival's in either group is marked, and never written by ``--model auto``."""
+    hold drift in both groups; a calibration whose drift exceeds its static reference in either
+    group (``Calibration.drifts_more``) is marked, and never written by ``--model auto``."""
     writable = {s.name for s in cal.writable()}
     ref_after, ref_others = cal.static_drift_reference()
+    lookup_after, lookup_others = cal.static_drift_reference(dynamic=False)
     best = cal.best
     out = [
         f"ranking on held-out force ({cal.held_out_rows or cal.fit.n_test} rows, read as the gateway reads "
         "them, against F_ref);",
         "hold drift: end minus start error of each held-out hold, RMS, % of full scale, for holds right",
-        f"after a higher load and the others (best static: {_pct(ref_after)}, {_pct(ref_others)}):",
+        f"after a higher load and the others; a drift correction may not exceed {_pct(ref_after)}, "
+        f"{_pct(ref_others)} (the best static rival's or the lookup's), a static curve not the lookup's "
+        f"({_pct(lookup_after)}, "
+        f"{_pct(lookup_others)}):",
         f"  {'calibration':<30} {'force RMS (N)':>13} {'after higher':>12} {'others':>8} {'parameters':>10}",
     ]
     for s in cal.ranking():

@@ -5,11 +5,11 @@ monotone lookup, every static curve with every drift form) is scored the way the
 read it (``Score``): held-out force RMS against the reference the channel will be compared with
 (F_ref), and the held-out hold drift in two groups (``holds.hold_drifts``: right after a higher
 load, and the others; % of full scale). ``Calibration.best`` is the best on held-out force among
-the *writable* ones: a static calibration, or a dynamic one whose hold drift in neither group
-exceeds the best static rival's or the static lookup's in that group by more than
-``HOLD_DRIFT_ALLOWANCE_PCT_FS`` (the scatter of a hold-drift figure over a few held-out holds: a
-hold's start and end means differ by a few tenths of a percent of full scale on noise alone):
-a drift correction that makes holds worse than a static curve would is never written.
+the *writable* ones: the static lookup (a user's own table, the reference), a static curve whose
+hold drift in neither group exceeds the lookup's, and a dynamic one whose hold drift in neither
+group exceeds the best static rival's or the lookup's. The comparison is strict: a calibration
+that holds a load worse than the lookup would, by any amount, is never written, and a drift
+correction that makes holds worse than a static curve would is never written either.
 """
 
 from __future__ import annotations
@@ -29,7 +29,6 @@ from .objectives import OFFSET, Objective
 from .rivals import Rivals
 
 __all__ = [
-    "HOLD_DRIFT_ALLOWANCE_PCT_FS",
     "OBJECTIVE_OPTIONS",
     "OBJECTIVE_WORDS",
     "STATIC_RIVALS",
@@ -66,11 +65,12 @@ OBJECTIVE_OPTIONS = {o.option: o for o in Objective}
 OBJECTIVE_WORDS: dict[str, str] = {Objective.LOG_R: "log-R", Objective.FORCE: "force"}
 
 
-#: How far (% of full scale) a dynamic calibration's held-out hold drift may lie above the static
-#: reference before it is not written (``Calibration.writable``).
-HOLD_DRIFT_ALLOWANCE_PCT_FS = 0.5
 #: The names of the static rivals every report compares with (besides static curves).
 STATIC_RIVALS = ("line", "lookup")
+
+
+def _pct(value: float) -> str:
+    return "-" if not math.isfinite(value) else f"{value:.2f}"
 
 
 def _none_if_nan(value: float) -> float | None:
@@ -181,31 +181,33 @@ class Calibration:
         """Every calibration, best held-out force first (the fewer parameters on a tie)."""
         return sorted(self.scores, key=lambda s: (_key(s.held_out_force_rms_n), s.n_parameters))
 
-    def static_drift_reference(self) -> tuple[float, float]:
-        """The held-out hold drift a dynamic calibration must not exceed, per group (% FS): the
-        smaller of the best static rival's (best held-out force among the static calibrations)
-        and the static lookup's; NaN where neither has a hold in that group."""
-        rivals = [s for s in (self.best_static(), self.score("lookup")) if s is not None]
+    def static_drift_reference(self, dynamic: bool = True) -> tuple[float, float]:
+        """The held-out hold drift a calibration must not exceed, per group (% FS): for a dynamic
+        one the smaller of the best static rival's (best held-out force among the static
+        calibrations) and the static lookup's; for a static one the lookup's. NaN where none has
+        a hold in that group."""
+        rivals = [self.score("lookup")] + ([self.best_static()] if dynamic else [])
         out = []
         for group in (0, 1):
-            finite = [v for s in rivals if math.isfinite(v := s.drift.all_pct_fs[group])]
+            finite = [v for s in rivals if s is not None and math.isfinite(v := s.drift.all_pct_fs[group])]
             out.append(min(finite) if finite else math.nan)
         return out[0], out[1]
 
+    def drifts_more(self, score: Score) -> bool:
+        """Whether ``score``'s held-out hold drift exceeds its ``static_drift_reference`` in
+        either group, by any amount (never the lookup's own: it is the reference)."""
+        if score.name == "lookup":
+            return False
+        reference = self.static_drift_reference(score.dynamic)
+        return any(
+            math.isfinite(ref) and math.isfinite(mine) and mine > ref
+            for mine, ref in zip(score.drift.all_pct_fs, reference, strict=True)
+        )
+
     def writable(self) -> list[Score]:
-        """The calibrations ``--model auto`` may write, best first: every static one, and each
-        dynamic one whose held-out hold drift exceeds ``static_drift_reference`` by more than
-        ``HOLD_DRIFT_ALLOWANCE_PCT_FS`` in neither group."""
-        reference = self.static_drift_reference()
-        out = []
-        for s in self.ranking():
-            if s.dynamic and any(
-                math.isfinite(ref) and math.isfinite(mine) and mine > ref + HOLD_DRIFT_ALLOWANCE_PCT_FS
-                for mine, ref in zip(s.drift.all_pct_fs, reference, strict=True)
-            ):
-                continue
-            out.append(s)
-        return out
+        """The calibrations ``--model auto`` may write, best held-out force first: the lookup, and
+        every other one that does not drift more than its static reference (``drifts_more``)."""
+        return [s for s in self.ranking() if not self.drifts_more(s)]
 
     @property
     def best(self) -> str:
@@ -234,10 +236,19 @@ class Calibration:
                 "on held-out force"
             )
         a, b = best.held_out_force_rms_n, rival.held_out_force_rms_n
-        return (
+        words = (
             f"{best.name} reads held-out force at {a:.4g} N against the best static rival "
             f"({rival.name}) at {b:.4g} N"
         )
+        if a > b and self.drifts_more(rival):
+            after, others = rival.drift.all_pct_fs
+            ref_after, ref_others = self.static_drift_reference(dynamic=False)
+            words += (
+                f", not written: its held-out holds drift more than the lookup's ({_pct(after)} "
+                f"against {_pct(ref_after)} % FS after a higher load, {_pct(others)} against "
+                f"{_pct(ref_others)} elsewhere)"
+            )
+        return words
 
     def offset_dict(self) -> dict[str, Any]:
         """The reference zero offset: fitted or not, value and 95 % interval."""

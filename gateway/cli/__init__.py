@@ -1,45 +1,59 @@
-"""The ``tactile-gateway`` command line: thin wrappers that parse, build config, call the library."""
+"""The ``tactile-gateway`` command line: thin wrappers that parse, build config, call the library.
+
+Each subcommand's module is imported only when that subcommand runs (or ``--help`` lists it):
+``calibrate`` does not pay for the web page, the poller and MQTT, about a second of imports.
+"""
 
 from __future__ import annotations
+
+import importlib
 
 import click
 
 from . import _threads  # noqa: F401  (before numpy loads: see the module)
-from .action_cmd import action_cmd
-from .apply_cmd import apply_cmd
-from .calibrate_cmd import calibrate_cmd
-from .config_cmd import channels, check_config
-from .discrepancy_cmd import discrepancy_cmd
-from .model_cmd import model
-from .record_cmd import paper, record
-from .run_cmd import demo, poll_once, run
-from .scan_cmd import scan
-from .subscribe_cmd import subscribe
-from .tare_cmd import tare
-from .view_cmd import view
+
+#: Every subcommand: its name, and the module and attribute that define it.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "model": ("model_cmd", "model"),
+    "check-config": ("config_cmd", "check_config"),
+    "channels": ("config_cmd", "channels"),
+    "calibrate": ("calibrate_cmd", "calibrate_cmd"),
+    "discrepancy": ("discrepancy_cmd", "discrepancy_cmd"),
+    "run": ("run_cmd", "run"),
+    "poll-once": ("run_cmd", "poll_once"),
+    "demo": ("run_cmd", "demo"),
+    "record": ("record_cmd", "record"),
+    "paper": ("record_cmd", "paper"),
+    "tare": ("tare_cmd", "tare"),
+    "scan": ("scan_cmd", "scan"),
+    "subscribe": ("subscribe_cmd", "subscribe"),
+    "apply": ("apply_cmd", "apply_cmd"),
+    "action": ("action_cmd", "action_cmd"),
+    "view": ("view_cmd", "view"),
+}
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class LazyGroup(click.Group):
+    """A group whose subcommands are imported on first use (click's lazy-loading pattern)."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(set(super().list_commands(ctx)) | set(COMMANDS))
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name in COMMANDS and cmd_name not in self.commands:
+            module_name, attribute = COMMANDS[cmd_name]
+            module = importlib.import_module(f"{__name__}.{module_name}")
+            command = getattr(module, attribute)
+            if not isinstance(command, click.Command):
+                raise TypeError(f"{module_name}.{attribute} is not a click command")
+            self.add_command(command, cmd_name)
+        return super().get_command(ctx, cmd_name)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="tactile-gateway")
 def main() -> None:
     """Tactile-array gateway: Modbus in, drift-corrected forces out, Prometheus metrics."""
 
 
-main.add_command(model)
-main.add_command(check_config)
-main.add_command(channels)
-main.add_command(calibrate_cmd)
-main.add_command(discrepancy_cmd)
-main.add_command(run)
-main.add_command(poll_once)
-main.add_command(demo)
-main.add_command(record)
-main.add_command(paper)
-main.add_command(tare)
-main.add_command(scan)
-main.add_command(subscribe)
-main.add_command(apply_cmd)
-main.add_command(action_cmd)
-main.add_command(view)
-
-__all__ = ["main"]
+__all__ = ["COMMANDS", "main"]

@@ -76,8 +76,59 @@ class SensorModel:
         return self.params.n_channels
 
     def initial_state(self) -> ModelState:
-        """Unloaded, fully relaxed state."""
+        """Unloaded, fully relaxed state: a sensor known to have been at rest."""
         return ModelState.zeros(self.n_channels)
+
+    def unknown_state(self) -> ModelState:
+        """A load history not known (a starting gateway, a record's first row): ``track``
+        starts each channel at its first valid sample from the equilibrium at the load it reads
+        (``equilibrium_state``), never from rest. Marked by a NaN held force."""
+        state = ModelState.zeros(self.n_channels)
+        return state.updated({"last_force_n": np.full(self.n_channels, np.nan)})
+
+    def settled_state(self, force_n: ArrayLike) -> ModelState:
+        """The state of a sensor loaded from rest to ``force_n`` (N) and held there until every
+        element has settled: creep strains at F / (A E(F)), the hysteresis direction after
+        loading, ``force_n`` held."""
+        f = np.maximum(np.asarray(force_n, dtype=np.float64), 0.0) * np.ones(self.n_channels)
+        return self.relax(self.record(ModelState.zeros(self.n_channels), f), SETTLED_S)
+
+    def equilibrium_state(
+        self, resistance_ohm: ArrayLike, temperature_c: ArrayLike | None = None
+    ) -> tuple[Inversion, ModelState]:
+        """The force a sensor settled at its load reads from ``resistance_ohm`` (ohm), and its
+        settled state (``settled_state``): the fixed point F = invert(R, settled strain at F),
+        from the instantaneous reading. Where the reading is no contact the sensor is at rest;
+        where it is invalid the state stays unknown (NaN held force)."""
+        r = np.asarray(resistance_ohm, dtype=np.float64) * np.ones(self.n_channels)
+        inv = self.invert(r, None, temperature_c)
+        for _ in range(EQUILIBRIUM_SWEEPS):
+            state = self.settled_state(np.nan_to_num(inv.force_n))
+            nxt = self.invert(r, state, temperature_c, guess_n=np.nan_to_num(inv.force_n))
+            change = np.abs(np.nan_to_num(nxt.force_n - inv.force_n))
+            inv = nxt
+            if float(change.max(initial=0.0)) <= 1e-10 * max(
+                1.0, float(np.nanmax(np.abs(inv.force_n), initial=0.0))
+            ):
+                break
+        state = self.settled_state(np.nan_to_num(inv.force_n))
+        unknown = inv.status == INVALID
+        if unknown.any():
+            state = state.updated({"last_force_n": np.where(unknown, np.nan, state.last_force_n)})
+        return inv, state
+
+    def _start_unknown(
+        self, resistance_ohm: ArrayLike, state: ModelState, temperature_c: ArrayLike | None
+    ) -> ModelState:
+        """``state`` with every channel of unknown history set to its equilibrium at
+        ``resistance_ohm`` (``equilibrium_state``); the others as they are."""
+        fresh = np.isnan(state.last_force_n)
+        if not fresh.any():
+            return state
+        _, eq = self.equilibrium_state(resistance_ohm, temperature_c)
+        return ModelState(
+            *(np.where(fresh, getattr(eq, f), getattr(state, f)) for f in ModelState.__dataclass_fields__)
+        )
 
     def gamma_s0(self) -> FloatArray:
         """The exponent scale gamma * s0 of eq. 9 per channel (dimensionless)."""
@@ -261,6 +312,7 @@ class SensorModel:
         Relax the state over ``dt_s`` with the previous force held, invert with it, then
         record the new force (0 N for no contact; the previous force for invalid samples).
         """
+        state = self._start_unknown(resistance_ohm, state, temperature_c)
         relaxed = self.relax(state, dt_s)
         inv = self.invert(resistance_ohm, relaxed, temperature_c, guess_n=np.maximum(state.last_force_n, 0.0))
         held = np.where(inv.status == INVALID, relaxed.last_force_n, inv.force_n)
@@ -287,6 +339,8 @@ class SensorModel:
         t = np.asarray(time_s, dtype=np.float64).reshape(-1)
         state0 = state0 or self.initial_state()
         dt = np.diff(t, prepend=t[0] if t0_s is None else t0_s)
+        if t.size and np.isnan(state0.last_force_n).any():
+            return self._start_then_series(r, t, dt, state0, temperature_c, max_sweeps)
         temp = self._temperature_factor(temperature_c)
         inv = self.inverter.invert(r, self._state_strain(state0), temp, None)
         for _ in range(max_sweeps):
@@ -304,6 +358,31 @@ class SensorModel:
                 return inv, self._state_series(ForceSeries(held, dt, state0))[1]
         return self._track_loop(r, dt, state0, temperature_c)
 
+    def _start_then_series(
+        self,
+        r: FloatArray,
+        t: FloatArray,
+        dt: FloatArray,
+        state: ModelState,
+        temperature_c: ArrayLike | None,
+        max_sweeps: int,
+    ) -> tuple[Inversion, ModelState]:
+        """A history not known: sample by sample until every channel has started from its
+        equilibrium, then the rest as one series."""
+        temps = None if temperature_c is None else np.broadcast_to(np.asarray(temperature_c), r.shape)
+        forces, status = np.empty_like(r), np.empty(r.shape, dtype=np.int8)
+        k = 0
+        while k < r.shape[0] and np.isnan(state.last_force_n).any():
+            inv, state = self.track(r[k], state, dt[k], None if temps is None else temps[k])
+            forces[k], status[k] = inv.force_n, inv.status
+            k += 1
+        if k < r.shape[0]:
+            rest, state = self.track_series(
+                r[k:], t[k:], state, None if temps is None else temps[k:], float(t[k - 1]), max_sweeps
+            )
+            forces[k:], status[k:] = rest.force_n, rest.status
+        return Inversion(forces, status), state
+
     def _track_loop(
         self, r: FloatArray, dt: FloatArray, state: ModelState, temperature_c: ArrayLike | None
     ) -> tuple[Inversion, ModelState]:
@@ -314,6 +393,12 @@ class SensorModel:
             inv, state = self.track(r[k], state, dt[k], None if temps is None else temps[k])
             forces[k], status[k] = inv.force_n, inv.status
         return Inversion(forces, status), state
+
+
+#: How long ``settled_state`` holds the load (s): every element has settled long before.
+SETTLED_S = 1e12
+#: The most fixed-point sweeps ``equilibrium_state`` takes.
+EQUILIBRIUM_SWEEPS = 60
 
 
 @lru_cache(maxsize=64)

@@ -233,9 +233,11 @@ class DeviceProcessor:
         return self.device.name
 
     def initial_state(self) -> DeviceState:
-        """The state of a device whose load history is not known: the physical model starts
-        relaxed, a calibrated channel from the equilibrium at its first sample's load."""
-        return DeviceState(ModelState.zeros(len(self.channels)))
+        """The state of a device whose load history is not known: every channel, read by the
+        physical model or a calibration table, starts from the equilibrium at its first valid
+        sample's load (``SensorModel.unknown_state``, ``CurveSet.initial_state``), never from rest."""
+        n = len(self.channels)
+        return DeviceState(ModelState.zeros(n).updated({"last_force_n": np.full(n, np.nan)}))
 
     def rested_state(self) -> DeviceState:
         """The state of a device known to have been unloaded long enough to settle."""
@@ -244,8 +246,9 @@ class DeviceProcessor:
 
     def carry_state(self, old: DeviceProcessor, state: DeviceState) -> DeviceState:
         """State for this (new) configuration from an old one: channels whose device,
-        index, effects and parameters are unchanged keep their creep state; others start
-        relaxed. The clock and the last snapshot carry over when the device is the same."""
+        index, effects and parameters are unchanged keep their creep state; others start from
+        the equilibrium at their first load (``initial_state``). The clock and the last
+        snapshot carry over when the device is the same."""
         fresh = self.initial_state().model_state
         arrays = state_arrays(fresh)
         old_pos = {k: i for i, k in enumerate(old.keys)}

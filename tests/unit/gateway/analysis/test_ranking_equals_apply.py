@@ -13,7 +13,6 @@ import pytest
 
 from gateway.analysis.apply import apply_calibration
 from gateway.analysis.calibration import Calibration, calibrate, write_calibration
-from gateway.analysis.calibration_result import HOLD_DRIFT_ALLOWANCE_PCT_FS
 from gateway.analysis.fitting import FitData
 from gateway.analysis.holds import drift_groups_pct, hold_drifts, hold_tolerance_n
 from gateway.analysis.records import ChannelRecord, format_record, read_record, write_record
@@ -80,14 +79,18 @@ def test_a_dynamic_calibration_that_drifts_more_than_static_is_never_written(
     calibrated: tuple[Path, ChannelRecord, Calibration],
 ) -> None:
     _, _, cal = calibrated
-    reference = cal.static_drift_reference()
     writable = {s.name for s in cal.writable()}
+    rivals = [cal.score("lookup"), cal.best_static()]
     for s in cal.scores:
+        # the lookup's, and for a dynamic calibration also the best static rival's, in each group
+        references = rivals if s.dynamic else rivals[:1]
         worse = any(
-            math.isfinite(r) and math.isfinite(v) and v > r + HOLD_DRIFT_ALLOWANCE_PCT_FS
-            for v, r in zip(s.drift.all_pct_fs, reference, strict=True)
+            math.isfinite(r) and math.isfinite(v) and v > r
+            for rival in references
+            if rival is not None
+            for v, r in zip(s.drift.all_pct_fs, rival.drift.all_pct_fs, strict=True)
         )
-        assert (s.name in writable) == (not s.dynamic or not worse), s.name
+        assert (s.name in writable) == (s.name == "lookup" or not worse), s.name
     assert cal.best in writable
     # this sensor creeps: a drift correction reads its holds flatter than any static curve
     best = cal.score(cal.best)

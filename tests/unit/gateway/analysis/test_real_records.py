@@ -66,8 +66,11 @@ def test_every_real_calibration_reports_model_and_line_on_the_same_held_out_rows
         d = c.as_dict()
         assert d["held_out_force_rms_n"]["line"] == c.rivals.line_force_rms_n
         assert d["verdict"] and d["best"] == next(row["name"] for row in d["ranking"] if row["writable"])
-        # what auto writes never reads held-out force worse than the line or the lookup
-        assert rms[c.best] <= min(rms["line"], rms["lookup"])
+        # what auto writes never reads held-out force worse than the lookup, nor worse than a line
+        # whose holds drift no more than the lookup's
+        assert rms[c.best] <= rms["lookup"]
+        line = c.score("line")
+        assert line is not None and (rms[c.best] <= rms["line"] or c.drifts_more(line))
         assert not d["noise"]["estimated"] and 0 < d["noise"]["floor_log_resistance"] < 0.3
         for e in c.fit.estimates:  # intervals never cross the parameter's own bounds
             allowed = PARAMETER_RANGES.get(e.name, OFFSET_RANGE)
@@ -82,6 +85,10 @@ def test_every_real_calibration_reports_model_and_line_on_the_same_held_out_rows
         assert d["force_offset"]["mode"] == "auto" and d["force_offset"]["value_n"] == c.fit.force_offset_n
 
 
+def rms_of(c: Calibration, name: str) -> float:
+    return c.force_rms()[name]
+
+
 def test_measured_numbers_on_the_real_files() -> None:
     nosil, thinsil, thick = cal(NOSIL), cal(THINSIL), cal(THICK)
     for c, full_scale in ((nosil, 4.461), (thinsil, 3.24), (thick, 25.94)):
@@ -89,15 +96,20 @@ def test_measured_numbers_on_the_real_files() -> None:
         assert c.fit.gap_test.force_rms_n <= c.rivals.line_force_rms_n, c.record
         assert c.fit.gap_test.force_rms_n < 0.05 * full_scale, c.record
         assert not c.verdict.startswith("THE LINE WINS")
-        # what auto writes reads held-out force at least as well as the line and the lookup
+        # what auto writes reads held-out force at least as well as the lookup
         rms = c.force_rms()
-        assert rms[c.best] <= min(rms["line"], rms["lookup"]), c.record
-    # thinsil: a conductance line with hysteresis on top reads it best (0.1313 N against the
-    # physical model's 0.1438 N read as the gateway reads it, and the plain line's 0.1352 N)
-    assert thinsil.best == "line + hysteresis"
-    # nosil: the physical model's holds drift more than the lookup's (after a higher load), so it
-    # is not written; a static power law is (0.1724 N against the model's 0.1788 N)
-    assert nosil.best == "power_law + static"
+        assert rms[c.best] <= rms["lookup"], c.record
+    # thinsil: a conductance line with hysteresis on top reads held-out force best (0.1313 N against
+    # the physical model's 0.1438 N read as the gateway reads it, and the lookup's 0.1375 N), but
+    # its holds right after a higher load drift more than the lookup's (0.47 against 0.34 % FS), so
+    # the lookup is written; the verdict says why the better line is not
+    ranked = thinsil.score("line + hysteresis")
+    assert ranked is not None and ranked.held_out_force_rms_n < 0.99 * rms_of(thinsil, "lookup")
+    assert thinsil.drifts_more(ranked) and thinsil.best == "lookup"
+    assert "not written: its held-out holds drift more than the lookup's" in thinsil.verdict
+    # nosil: the physical model's and the static power law's holds drift more than the lookup's
+    # after a higher load (3.17 and 2.41 against 0.88 % FS), so the lookup is written
+    assert nosil.best == "lookup"
     physics = nosil.score("physics")
     assert physics is not None and "physics" not in {s.name for s in nosil.writable()}
     assert physics.drift.after_higher_pct_fs > nosil.static_drift_reference()[0] + 0.5
@@ -124,12 +136,16 @@ def test_measured_numbers_on_the_real_files() -> None:
 
 
 def test_auto_writes_the_best_calibration_and_the_offset_corrected_force_range() -> None:
-    thinsil = cal(THINSIL)
-    text = calibration_toml([thinsil], model="auto", names={"0": "tip"})
+    thinsil, thick = cal(THINSIL), cal(THICK)
+    text = calibration_toml([thick], model="auto", names={"0": "tip"})
     assert '[channel."tip"]' in text and '[channel."0"]' not in text
     # the winner is a curve: its [curve] table is written beside the physical model's parameters
-    assert f"# model: {thinsil.best}" in text and '[curve."tip"]' in text
+    assert thick.best == "lookup + hysteresis"
+    assert f"# model: {thick.best}" in text and '[curve."tip"]' in text
     assert "[line." not in text and "[lookup." not in text
+    # thinsil's winner is the lookup: its [lookup] table, no curve
+    text = calibration_toml([thinsil], model="auto", names={"0": "tip"})
+    assert "# model: lookup" in text and '[lookup."tip"]' in text and "[curve." not in text
     assert "# parameters fitted with the force objective" in text
     text = calibration_toml([thinsil], model="physics", names={"0": "tip"})
     # the calibrated range is the record's + the fitted zero offset, and the meta says so; the

@@ -95,7 +95,7 @@ def held(n: int = 2, ticks: int | None = None, clock: DeviceClock = MS64) -> Raw
 def run(
     proc: DeviceProcessor, polls: Sequence[tuple[RawSample, float]]
 ) -> tuple[list[DeviceSnapshot], DeviceState]:
-    state = proc.initial_state()
+    state = proc.rested_state()
     snaps = []
     for raw, host_s in polls:
         snap, state = proc.process(state, raw, 1_700_000_000.0 + host_s, host_s)
@@ -263,7 +263,7 @@ def test_the_paper_model_is_open_at_rest() -> None:
 def test_a_reading_at_the_baseline_is_no_contact() -> None:
     proc = DeviceProcessor(make_device(4, clock=None, baselines=BASELINES), "bus", 0.1)
     r = np.array([r_of(1.0), 500e3, 2e6, 194_750.0])
-    snap, _ = proc.process(proc.initial_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
     assert snap.status[1:].tolist() == [ChannelStatus.NO_CONTACT] * 3
     assert snap.force_n[1:].tolist() == [0.0, 0.0, 0.0]
     assert snap.status[0] == ChannelStatus.OK
@@ -271,7 +271,7 @@ def test_a_reading_at_the_baseline_is_no_contact() -> None:
     np.testing.assert_array_equal(snap.resistance_ohm, r)
     # without the baselines the same readings are a load: 194.75 kohm reads about 0.12 N
     plain = DeviceProcessor(make_device(4, clock=None), "bus", 0.1)
-    before, _ = plain.process(plain.initial_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
+    before, _ = plain.process(plain.rested_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
     assert before.force_n[3] > 0.1 and before.status[3] == ChannelStatus.OK
 
 
@@ -279,7 +279,7 @@ def test_a_reading_above_the_baseline_is_no_contact() -> None:
     # less conductance than the leak alone (600 kohm against a 500 kohm baseline): 0 N
     proc = DeviceProcessor(make_device(4, clock=None, baselines=BASELINES), "bus", 0.1)
     r = np.array([r_of(1.0), 600e3, 1e9, 1e7])
-    snap, _ = proc.process(proc.initial_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
     assert snap.status[1:].tolist() == [ChannelStatus.NO_CONTACT] * 3
     assert snap.force_n[1:].tolist() == [0.0, 0.0, 0.0]
 
@@ -288,13 +288,13 @@ def test_a_reading_above_the_baseline_is_no_contact() -> None:
 def test_a_loaded_channel_with_a_leak_reads_its_force(force_n: float) -> None:
     proc = DeviceProcessor(make_device(4, clock=None, baselines=BASELINES), "bus", 0.1)
     r = np.array([r_of(force_n)] + [leaky(force_n, b) for b in (500e3, 2e6, 194_750.0)])
-    snap, _ = proc.process(proc.initial_state(), RawSample(resistance_ohm=r), 0.0, 0.0)  # dt = 0
+    snap, _ = proc.process(proc.rested_state(), RawSample(resistance_ohm=r), 0.0, 0.0)  # dt = 0
     assert snap.status.tolist() == [ChannelStatus.OK] * 4
     np.testing.assert_allclose(snap.force_n, force_n, rtol=1e-6)
     np.testing.assert_allclose(snap.force_static_n, force_n, rtol=1e-6)
     # uncorrected, the 194.75 kohm leak adds to the force
     plain = DeviceProcessor(make_device(4, clock=None), "bus", 0.1)
-    before, _ = plain.process(plain.initial_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
+    before, _ = plain.process(plain.rested_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
     assert before.force_n[3] > force_n * (1 + 1e-3)
 
 
@@ -302,7 +302,7 @@ def test_channels_without_a_baseline_are_bitwise_unchanged() -> None:
     # ch01 has a 500 kohm baseline, ch03 an infinite one (open at rest: no leak to take off)
     with_b = DeviceProcessor(make_device(4, clock=MS64, baselines=[None, 5e5, None, math.inf]), "bus", 0.1)
     plain = DeviceProcessor(make_device(4, clock=MS64), "bus", 0.1)
-    s_b, s_plain, s_fed = with_b.initial_state(), plain.initial_state(), plain.initial_state()
+    s_b, s_plain, s_fed = with_b.rested_state(), plain.rested_state(), plain.rested_state()
     rng = np.random.default_rng(3)
     others = [0, 2, 3]
     for k in range(12):
@@ -343,7 +343,7 @@ def test_an_adc_channel_at_its_baseline_counts_is_no_contact() -> None:
     device = make_device(2, clock=None, encoding="adc", baselines=[194_750.0, None], front_end=front_end)
     proc = DeviceProcessor(device, "bus", 0.1)
     counts = np.array([3895, 3895], dtype=np.uint16)  # register values: the lookup path
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts), 0.0, 0.0)
     # without a zero the leak reads as force at the converter's idle floor (3895 >= 4095 -
     # 0.06 x 4095 = 3849.3): shown, flagged no_zero, not counted
     assert snap.status.tolist() == [ChannelStatus.NO_CONTACT, ChannelStatus.NO_ZERO]
@@ -372,7 +372,7 @@ def test_a_saturated_front_end_code_is_a_saturated_channel_without_a_force() -> 
     ):
         for bits in (None, np.zeros(2, dtype=bool)):  # without and with (clear) fault bitmaps
             raw = RawSample(counts=counts, open_bits=bits, short_bits=bits)
-            snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
+            snap, _ = proc.process(proc.rested_state(), raw, 0.0, 0.0)
             assert snap.status[0] == ChannelStatus.SATURATED
             assert math.isnan(snap.force_n[0])
             assert snap.channels()[0].force_n is None

@@ -77,7 +77,7 @@ def make_device(
 
 def _read(conversions: list[Conversion | None], r: list[float]) -> tuple[np.ndarray, list[str]]:
     proc = DeviceProcessor(make_device(conversions), "bus", 0.1)
-    snap, _ = proc.process(proc.initial_state(), RawSample(resistance_ohm=np.array(r)), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(resistance_ohm=np.array(r)), 0.0, 0.0)
     np.testing.assert_array_equal(snap.force_static_n, snap.force_n)  # stateless: static = force
     return np.asarray(snap.force_n), [ChannelStatus(s).label for s in snap.status]
 
@@ -122,7 +122,7 @@ def test_a_short_rail_read_as_a_reading_is_saturated_not_extrapolated_to_1e300_n
     proc = DeviceProcessor(make_device([LINE, LOOKUP]), "bus", 0.1)
     no_fault = np.zeros(2, dtype=np.bool_)
     raw = RawSample(resistance_ohm=np.array([0.0, 0.0]), open_bits=no_fault, short_bits=no_fault)
-    snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), raw, 0.0, 0.0)
     assert [ChannelStatus(s).label for s in snap.status] == ["saturated"] * 2
     np.testing.assert_array_equal(snap.force_n, [10.0, 8.0])
 
@@ -230,13 +230,13 @@ def test_baseline_is_taken_off_before_the_line() -> None:
     excess = 1.0 / baseline - 1.0 / LINE.unloaded_resistance_ohm
     loaded = 1.0 / (M * 3.0 + N + excess)
     raw = RawSample(resistance_ohm=np.array([baseline, 2e5]))
-    snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), raw, 0.0, 0.0)
     assert [ChannelStatus(s).label for s in snap.status] == ["no_contact", "no_contact"]
     # the lookup's 0 N end: its last segment (2 N at 1e4, 0.5 N at 1e5) extended to 1e5 * 10^(1/3)
     assert LOOKUP.unloaded_resistance_ohm == pytest.approx(1e5 * 10 ** (1 / 3))
     g_lookup = 1.0 / 1e4 + 1.0 / 2e5 - 1.0 / LOOKUP.unloaded_resistance_ohm
     raw = RawSample(resistance_ohm=np.array([loaded, 1.0 / g_lookup]))
-    snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), raw, 0.0, 0.0)
     assert snap.force_n[0] == pytest.approx(3.0, rel=1e-9)
     assert snap.force_n[1] == pytest.approx(2.0, rel=1e-9)
 
@@ -247,7 +247,7 @@ def test_adc_channels_with_a_line() -> None:
     r = np.array([_r_line(3.0), SensorModel(PAPER_EFFECTS, [SensorParams()]).resistance(np.array([2.0]))[0]])
     counts = div.counts(div.output_voltage(r))
     proc = DeviceProcessor(dev, "bus", 0.1)
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts), 0.0, 0.0)
     assert [ChannelStatus(s).label for s in snap.status] == ["ok", "ok"]
     np.testing.assert_allclose(snap.force_n, [3.0, 2.0], rtol=0.01)
 

@@ -308,3 +308,22 @@ def test_a_bad_curve_table_names_the_file_and_the_key(
     assert f"{tmp_path / 'cal.toml'}: {where}: " in shown, shown
     assert allowed in shown, shown
     assert f"(calibration file of bus[0].device[0].calibration in {tmp_path / 'gateway.toml'})" in shown
+
+
+def test_a_starting_gateway_reads_a_loaded_settled_sensor_at_its_load_on_every_kind_of_channel() -> None:
+    """A gateway that starts on a sensor already loaded (its history not known) reads it from the
+    equilibrium at that load, on a physics channel and a curve channel alike; one known to have
+    been at rest (``rested_state``) reads the same resistances as a load just applied."""
+    model = SensorModel(PAPER_EFFECTS, [SensorParams()])
+    r_phys = float(model.held_step(np.array([3.0]), np.array([1e9])).total_ohm[0])
+    r_curve = r_power(crept(1.5, math.inf))
+    proc = DeviceProcessor(make_device([None, CREEP]), "bus", 0.1)
+    times = [0.0, 0.1, 1.0, 10.0]
+    rows = [[r_phys, r_curve]] * len(times)
+    started, _ = feed(proc, proc.initial_state(), rows, times)
+    for snap in started:
+        assert labels(snap) == ["ok", "ok"]
+        assert snap.force_n[0] == pytest.approx(3.0, rel=1e-6)
+        assert snap.force_n[1] == pytest.approx(1.5, rel=1e-12)
+    rested, _ = feed(proc, proc.rested_state(), rows, times)
+    assert rested[0].force_n[0] > 3.0 * 1.01 and rested[0].force_n[1] > 1.5 * 1.1

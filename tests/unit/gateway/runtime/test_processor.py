@@ -71,7 +71,7 @@ def test_adc_forces_are_recovered_and_ok() -> None:
     dev = make_device()
     proc = DeviceProcessor(dev, "bus", 0.1)
     forces = [0.5, 1.0, 2.0, 5.0]
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts_for(forces)), 1000.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts_for(forces)), 1000.0, 0.0)
     assert snap.status.tolist() == [ChannelStatus.OK] * 4
     # 16-bit quantization of the divider: well under 1 % at these forces
     np.testing.assert_allclose(snap.force_n, forces, rtol=0.01)
@@ -86,7 +86,7 @@ def test_rails_give_open_and_short_without_values() -> None:
     counts = counts_for([1.0, 1.0, 1.0, 1.0])
     counts[0] = 0  # open: no current through the sensor
     counts[1] = DIVIDER.full_scale  # short
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts), 0.0, 0.0)
     assert snap.status[0] == ChannelStatus.OPEN
     assert snap.status[1] == ChannelStatus.SHORT
     assert math.isnan(snap.force_n[0]) and math.isnan(snap.force_n[1])
@@ -101,7 +101,7 @@ def test_with_device_bitmaps_the_rails_are_readings_not_faults() -> None:
     dev = make_device()
     proc = DeviceProcessor(dev, "bus", 0.1)
     counts = counts_for([2.0, 2.0, 2.0, 2.0])
-    state = proc.initial_state()
+    state = proc.rested_state()
     _, state = proc.process(state, RawSample(counts=counts, device_time_s=0.0), 0.0, 0.0)
     counts[0] = 0  # unloaded: the contact is open at rest, no current
     counts[1] = DIVIDER.full_scale  # less resistance than one LSB resolves
@@ -121,7 +121,7 @@ def test_no_contact_and_saturated_from_the_model() -> None:
     counts = counts_for([1.0, 1.0, 1.0, 1.0])
     counts[0] = 3  # about 218 Mohm: far above R(force_min)
     counts[1] = DIVIDER.full_scale - 3  # a few ohm: below R(force_max)
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts), 0.0, 0.0)
     assert snap.status[0] == ChannelStatus.NO_CONTACT
     assert snap.force_n[0] == 0.0 and snap.force_static_n[0] == 0.0
     assert snap.status[1] == ChannelStatus.SATURATED
@@ -132,7 +132,7 @@ def test_float32_encoding_statuses() -> None:
     dev = make_device(encoding="float32")
     proc = DeviceProcessor(dev, "bus", 0.1)
     r = np.array([np.inf, 0.0, np.nan, -5.0])
-    snap, _ = proc.process(proc.initial_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(resistance_ohm=r), 0.0, 0.0)
     assert [ChannelStatus(s) for s in snap.status] == [
         ChannelStatus.OPEN,
         ChannelStatus.SHORT,
@@ -153,7 +153,7 @@ def test_device_bitmaps_take_precedence() -> None:
         short_bits=np.array([False, True, False, False]),
         saturated_bits=np.array([False, False, True, False]),
     )
-    snap, _ = proc.process(proc.initial_state(), raw, 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), raw, 0.0, 0.0)
     assert [ChannelStatus(s) for s in snap.status] == [
         ChannelStatus.OPEN,
         ChannelStatus.SHORT,
@@ -165,7 +165,7 @@ def test_device_bitmaps_take_precedence() -> None:
 def test_stale_keeps_last_values_and_marks_every_channel() -> None:
     dev = make_device()
     proc = DeviceProcessor(dev, "bus", 0.1)
-    state = proc.initial_state()
+    state = proc.rested_state()
     never, state = proc.stale(state, 5.0, "timeout")
     assert never.status.tolist() == [ChannelStatus.STALE] * 4
     assert not never.up and never.last_success_timestamp_s is None
@@ -182,7 +182,7 @@ def test_stale_keeps_last_values_and_marks_every_channel() -> None:
 def test_snapshot_is_immutable() -> None:
     dev = make_device()
     proc = DeviceProcessor(dev, "bus", 0.1)
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts_for([1, 1, 1, 1])), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts_for([1, 1, 1, 1])), 0.0, 0.0)
     with pytest.raises(ValueError):
         snap.force_n[0] = 3.0
     with pytest.raises(dataclasses.FrozenInstanceError):
@@ -193,7 +193,7 @@ def test_channel_views_never_contain_nan_or_inf() -> None:
     dev = make_device(encoding="float32")
     proc = DeviceProcessor(dev, "bus", 0.1)
     rng = np.random.default_rng(3)
-    state = proc.initial_state()
+    state = proc.rested_state()
     for k in range(30):
         r = rng.choice([np.nan, np.inf, -np.inf, 0.0, -1.0, 1e3, 5e4, 1e6, 1e12], size=4)
         snap, state = proc.process(state, RawSample(resistance_ohm=r, device_time_s=float(k)), 0.0, 0.0)
@@ -231,7 +231,7 @@ def test_snapshot_array_quantities_from_processing() -> None:
     proc = DeviceProcessor(dev, "bus", 0.1)
     counts = counts_for([2.0, 1.0, 1.0, 1.0])
     counts[1] = counts[2] = counts[3] = 3  # no contact
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts), 0.0, 0.0)
     assert snap.channels_in_contact == 1
     assert snap.center_of_pressure_mm == (0.0, 0.0)
     assert snap.peak_channel == "ch00"
@@ -242,7 +242,7 @@ def test_snapshot_array_quantities_from_processing() -> None:
 def test_disabled_channels_are_left_out() -> None:
     dev = make_device(enabled=(True, False, True, False))
     proc = DeviceProcessor(dev, "bus", 0.1)
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts_for([1, 2, 3, 4])), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts_for([1, 2, 3, 4])), 0.0, 0.0)
     assert snap.channel_names == ("ch00", "ch02")
     np.testing.assert_allclose(snap.force_n, [1.0, 3.0], rtol=0.01)
 
@@ -259,7 +259,7 @@ def test_drift_corrected_force_stays_while_static_estimate_creeps() -> None:
     proc = DeviceProcessor(dev, "bus", 1.0)
     times = np.arange(0.0, 601.0, 5.0)
     counts = _held_counts(2.0, times, params)
-    state = proc.initial_state()
+    state = proc.rested_state()
     corrected, static = [], []
     for t, c in zip(times, counts, strict=True):
         # the host clock is frozen: the device clock alone must drive the creep state
@@ -276,7 +276,7 @@ def test_host_clock_is_used_without_device_clock_and_after_a_device_restart() ->
     dev = make_device(n=1, columns=1)
     proc = DeviceProcessor(dev, "bus", 1.0)
     counts = np.array([counts_for([2.0])[0]])
-    state = proc.initial_state()
+    state = proc.rested_state()
     _, state = proc.process(state, RawSample(counts=counts), 0.0, 100.0)
     assert not state.time_from_device and state.last_time_s == 100.0
     _, s1 = proc.process(state, RawSample(counts=counts), 0.0, 150.0)
@@ -294,7 +294,7 @@ def test_channels_are_grouped_by_effect_set() -> None:
     proc = DeviceProcessor(dev, "bus", 0.1)
     assert len(proc.groups) == 2
     assert sorted(idx.tolist() for idx, _ in proc.groups) == [[0, 2], [1, 3]]
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts_for([1, 1, 1, 1])), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts_for([1, 1, 1, 1])), 0.0, 0.0)
     assert snap.status.tolist() == [ChannelStatus.OK] * 4
     # the tunneling-only model reads the paper model's resistance differently
     assert abs(snap.force_n[1] - snap.force_n[0]) > 0.01
@@ -303,7 +303,7 @@ def test_channels_are_grouped_by_effect_set() -> None:
 def test_reload_keeps_state_of_unchanged_channels_only() -> None:
     dev = make_device()
     proc = DeviceProcessor(dev, "bus", 0.1)
-    state = proc.initial_state()
+    state = proc.rested_state()
     counts = counts_for([2.0, 2.0, 2.0, 2.0])
     for t in range(0, 300, 10):
         _, state = proc.process(state, RawSample(counts=counts, device_time_s=float(t)), 0.0, 0.0)
@@ -475,8 +475,8 @@ def test_register_counts_convert_as_integer_counts(bitmaps: bool) -> None:
     if bitmaps:
         extra = {"open_bits": bits.copy(), "short_bits": bits.copy(), "saturated_bits": bits.copy()}
         extra["open_bits"][3] = True
-    a, _ = proc.process(proc.initial_state(), RawSample(counts=counts, **extra), 0.0, 0.0)
-    b, _ = proc.process(proc.initial_state(), RawSample(counts=counts.astype(np.uint16), **extra), 0.0, 0.0)
+    a, _ = proc.process(proc.rested_state(), RawSample(counts=counts, **extra), 0.0, 0.0)
+    b, _ = proc.process(proc.rested_state(), RawSample(counts=counts.astype(np.uint16), **extra), 0.0, 0.0)
     np.testing.assert_array_equal(a.status, b.status)
     np.testing.assert_array_equal(a.force_n, b.force_n)
     np.testing.assert_array_equal(a.resistance_ohm, b.resistance_ohm)

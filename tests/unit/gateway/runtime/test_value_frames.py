@@ -38,6 +38,12 @@ channels = 4
 columns = 2
 pitch_mm = 2.5
 """
+#: the spec's t = 0 resistances on the static curve (no creep): a gateway that starts on a loaded,
+#: creeping sensor reads it from its equilibrium instead (tests/unit/gateway/model/test_start_state.py)
+STATIC = """
+[bus.device.model]
+effects = ["tunneling", "contact"]
+"""
 
 
 def config(extra: str) -> GatewayConfig:
@@ -188,14 +194,17 @@ address = 0
 
 # ------------------------------------------------------------------ encodings and blocks
 async def test_resistance_in_float32_cdab_over_two_blocks_lands_in_channel_order() -> None:
-    cfg = config("""
+    cfg = config(
+        STATIC
+        + """
 [bus.device.frame]
 quantity = "resistance"
 unit = "kohm"
 type = "float32"
 order = "CDAB"
 blocks = [{ address = 300, values = 1 }, { address = 10, values = 3 }]
-""")
+"""
+    )
     dev = VirtualDevice()
     dev.set_input(300, f32_cdab(93.8))
     dev.set_input(10, f32_cdab(46.9) + f32_cdab(9.98) + f32_cdab(138.5))
@@ -209,7 +218,9 @@ blocks = [{ address = 300, values = 1 }, { address = 10, values = 3 }]
 async def test_counts_frame_at_an_odd_address_reads_as_the_adc_map_does() -> None:
     """A DFRobot-style frame (input 7.., uint16 counts) gives the forces the spec's counts mean."""
     counts = [6314, 11518, 32800, 4413]  # tests/unit/gateway/runtime/test_bus.py: 1, 2, 5, 0.5 N
-    cfg = config("""
+    cfg = config(
+        STATIC
+        + """
 [bus.device.front_end]
 kind = "high_side"
 reference_ohm = 10000.0
@@ -220,7 +231,8 @@ adc_bits = 16
 [bus.device.frame]
 quantity = "counts"
 address = 7
-""")
+"""
+    )
     dev = VirtualDevice()
     dev.set_input(7, counts)
     poller, vt, _ = poller_for(cfg, dev)
@@ -230,7 +242,9 @@ address = 7
 
 
 async def test_uint32_counts_with_offset_go_through_the_front_end() -> None:
-    cfg = config("""
+    cfg = config(
+        STATIC
+        + """
 [bus.device.front_end]
 kind = "high_side"
 reference_ohm = 10000.0
@@ -244,7 +258,8 @@ type = "uint32"
 order = "DCBA"
 offset = -100.0
 address = 0
-""")
+"""
+    )
     dev = VirtualDevice()
     words = []
     for c in (6314, 11518, 32800, 4413):
