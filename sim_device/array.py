@@ -82,6 +82,8 @@ class SimArray:
         self.scenario: Scenario = cfg.resolve_scenario()
         self._params = cfg.sensor_params(device_id)
         self._sensor = PaperSensor(self._params)
+        if self.scenario.settled:
+            self._sensor.settle(self.scenario.force_n(np.zeros(1))[0])
         self._world = World(cfg.world_effects, self._params, self._sensor.gamma_s0)
         self._n = cfg.channels
         self._map: DeviceMap = make_map(cfg)

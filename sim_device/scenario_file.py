@@ -33,6 +33,7 @@ _TOP_KEYS = (
     "name",
     "description",
     "repeat",
+    "settled",
     "base_temperature_c",
     "load",
     "indentation",
@@ -200,6 +201,9 @@ def parse_scenario(
     repeat = data.get("repeat", False)
     if not isinstance(repeat, bool):
         raise ctx.error("repeat", f"must be true or false, got {repeat!r}")
+    settled = data.get("settled", False)
+    if not isinstance(settled, bool):
+        raise ctx.error("settled", f"must be true or false, got {settled!r}")
     base_temp = _number(data, "base_temperature_c", ctx, "", DEFAULT_TEMPERATURE_C)
     if not TEMPERATURE_RANGE_C[0] <= base_temp <= TEMPERATURE_RANGE_C[1]:
         raise ctx.error("base_temperature_c", f"{base_temp:g} is outside {TEMPERATURE_RANGE_C}")
@@ -272,6 +276,7 @@ def parse_scenario(
         repeat=repeat,
         base_temperature_c=base_temp,
         faults=faults,
+        settled=settled,
     )
 
 

@@ -207,6 +207,8 @@ class ScenarioSpec:
     repeat: bool = False
     base_temperature_c: float = DEFAULT_TEMPERATURE_C
     faults: Sequence[FaultEvent] = ()
+    #: the sensors have carried their t = 0 load long before the start: their creep has settled
+    settled: bool = False
 
 
 def check_range(name: str, value: float, allowed: tuple[float, float]) -> None:

@@ -119,8 +119,12 @@ class Scenario:
         base_temperature_c: float = DEFAULT_TEMPERATURE_C,
         faults: Sequence[FaultEvent] = (),
         duration_s: float | None = None,
+        settled: bool = False,
     ) -> None:
         self.name = name
+        #: the sensors have carried their t = 0 load long before the start (their creep has
+        #: settled there), as on a rig that was loaded before the device was switched on
+        self.settled = bool(settled)
         self.layout = layout or ArrayLayout()
         self.description = description
         self.loads = tuple(loads)
@@ -197,6 +201,7 @@ class Scenario:
             repeat=spec.repeat,
             base_temperature_c=spec.base_temperature_c,
             faults=spec.faults,
+            settled=spec.settled,
         )
 
     @classmethod
@@ -251,9 +256,14 @@ class Scenario:
 
     @classmethod
     def constant(
-        cls, force_n: float, layout: ArrayLayout | None = None, temperature_c: float = 25.0
+        cls,
+        force_n: float,
+        layout: ArrayLayout | None = None,
+        temperature_c: float = 25.0,
+        settled: bool = False,
     ) -> Scenario:
-        """Every channel held at ``force_n`` from t = 0 (handy for tests)."""
+        """Every channel held at ``force_n`` from t = 0 (handy for tests); ``settled``: held
+        long before t = 0 already."""
         check_range("force_n", force_n, FORCE_RANGE_N)
         profile = ProfileBuilder(force_n).build()
         return cls(
@@ -262,6 +272,7 @@ class Scenario:
             loads=[UniformLoad(profile)],
             description=f"all channels held at {force_n:g} N",
             base_temperature_c=temperature_c,
+            settled=settled,
         )
 
     def __repr__(self) -> str:

@@ -177,6 +177,13 @@ class PaperSensor:
         self.kelvin_strain: FloatArray = np.zeros(self.n_channels)
         self.held_force_n: FloatArray = np.zeros(self.n_channels)
 
+    def settle(self, force_n: FloatArray) -> None:
+        """Make ``force_n`` (N, per sensor) a load carried since long ago: held, with the
+        Kelvin strain at its equilibrium sigma / E1(F)."""
+        f = np.maximum(np.asarray(force_n, dtype=np.float64), 0.0) * np.ones(self.n_channels)
+        self.held_force_n = f.copy()
+        self.kelvin_strain = np.asarray(f / self._area / (self._e1 + self._e1_slope * f))
+
     def contact_ohm(self, force_n: FloatArray) -> FloatArray:
         """Both electrode contacts, 2 R_con (eq. 12); +inf for F <= 0 (open at rest)."""
         f = np.asarray(force_n, dtype=np.float64)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import tempfile
 from collections.abc import Iterable, Mapping
+from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -61,6 +62,7 @@ from .fitting import FitData, FitResult, fit_channel, invert_drift_corrected
 from .load_history import start_load
 from .measurement import noise_model, time_is_real
 from .objectives import OFFSET
+from .parallel import Workers
 from .records import ChannelRecord, Record
 from .rivals import Rivals
 
@@ -111,6 +113,7 @@ def calibrate(
     try_hysteresis: bool = True,
     objective: Objective | str = Objective.AUTO,
     force_offset: OffsetMode | str = OffsetMode.AUTO,
+    jobs: int | None = None,
 ) -> Calibration:
     """Fit the model and its rivals to one channel of a record.
 
@@ -119,7 +122,25 @@ def calibrate(
     ``"auto"`` fits both and keeps the one with the lower held-out force RMS. ``force_offset``:
     ``"fit"`` fits a reference zero offset, ``"auto"`` fits it and keeps it only if it lowers the
     held-out force RMS, ``"none"`` leaves it out. Held-out force errors of a fit with an offset
-    are against F_ref + offset (the same as F_inv - offset against F_ref)."""
+    are against F_ref + offset (the same as F_inv - offset against F_ref). ``jobs``: the
+    processes it may use (``parallel.Workers``; default every core), the same result with any."""
+    with Workers(jobs) as workers:
+        return _calibrate(
+            channel, effects, prior, record_name, metadata, try_hysteresis, objective, force_offset, workers
+        )
+
+
+def _calibrate(
+    channel: ChannelRecord,
+    effects: Iterable[str],
+    prior: SensorParams | None,
+    record_name: str,
+    metadata: Mapping[str, str] | None,
+    try_hysteresis: bool,
+    objective: Objective | str,
+    force_offset: OffsetMode | str,
+    workers: Workers,
+) -> Calibration:
     objective = choice_of(Objective, objective, "objective")
     force_offset = choice_of(OffsetMode, force_offset, "force_offset")
     meta = dict(metadata or {})
@@ -173,17 +194,23 @@ def calibrate(
             f"the physical model fitted on every {math.ceil(data.time_s.size / PHYSICS_FIT_ROWS)}th of those "
             f"rows ({physics_data.time_s.size}); it is scored on all of them, as the gateway reads it"
         )
-    runs = [_fit_objective(physics_data, chosen, ranged, "log_r", force_offset, try_h, None)]
+    pending = [_fit_objective(physics_data, chosen, ranged, "log_r", force_offset, try_h, None, workers)]
     if objective != Objective.LOG_R:
         lookup_n = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test).lookup_force_rms_n
-        log_r_n = runs[0].fit.gap_test.force_rms_n
+        # in contention by the log-R fit before its zero offset (the force objective starts there)
+        log_r_n = pending[0].run.fit.gap_test.force_rms_n
         if objective == Objective.FORCE or not log_r_n > CONTENTION_FACTOR * lookup_n:
-            runs.append(_fit_objective(physics_data, chosen, ranged, "force", force_offset, try_h, runs[0]))
+            pending.append(
+                _fit_objective(
+                    physics_data, chosen, ranged, "force", force_offset, try_h, pending[0].run, workers
+                )
+            )
         else:
             notes.append(
                 f"force objective not tried: the log-R fit reads held-out force at {log_r_n:.4g} N, more "
                 f"than {CONTENTION_FACTOR:g} x the monotone lookup's {lookup_n:.4g} N (out of contention)"
             )
+    runs = [p.done() for p in pending]
     for run in runs:
         notes += run.notes
     pick = runs[-1] if objective == Objective.FORCE else min(runs, key=lambda r: _rms(r.fit))
@@ -205,8 +232,6 @@ def calibrate(
     record_range = (ranged.force_min_n, ranged.force_max_n)
     rival_range = widened_range_n(record_range, margin)
     rivals = Rivals.fit(data.force_n, data.resistance_ohm, data.train, test, rival_range)
-    real_time = time_is_real(meta)
-    cands = tuple(rank_candidates(data, real_time=real_time, range_n=rival_range))
     fs = float(hi)
     scores = [
         Score("line", rivals.line_force_rms_n, held_out_drift(data, rivals.line_force_n, fs), 2, False),
@@ -214,8 +239,6 @@ def calibrate(
             "lookup", rivals.lookup_force_rms_n, held_out_drift(data, rivals.lookup_force_n, fs),
             rivals.lookup.n_parameters, False,
         ),
-    ] + [
-        Score(c.name, c.held_out_force_rms_n, c.drift, c.n_parameters, c.channel.drift.active) for c in cands
     ]  # fmt: skip
     start = start_load(data.time_s, data.resistance_ohm, data.force_n)
     starting = start.force_n if start.loaded else 0.0
@@ -244,15 +267,21 @@ def calibrate(
         offset_mode=force_offset,
         notes=tuple(notes),
         warnings=tuple(warnings),
-        candidates=cands,
+        candidates=(),
         scores=tuple(scores),
         starting_load_n=starting,
         held_out_rows=int(np.count_nonzero(test)),
     )
-    physics = physics_read_back(cal, small, meta)
+    # the physical model read back (its written parameters and ranges only) while the curves fit
+    read_back = workers.submit(physics_read_back, cal, small, meta)
+    cands = tuple(rank_candidates(data, real_time=time_is_real(meta), range_n=rival_range))
+    scores += [
+        Score(c.name, c.held_out_force_rms_n, c.drift, c.n_parameters, c.channel.drift.active) for c in cands
+    ]
+    physics = read_back.result()
     drift = held_out_drift(data, physics, fs)
     physics_score = Score("physics", _held_out_rms(physics, data), drift, fit.n_parameters, _dynamic(fit))
-    return replace(cal, scores=(physics_score, *cal.scores))
+    return replace(cal, candidates=cands, scores=(physics_score, *scores))
 
 
 #: The physical model's fit (up to 8 fits of a stiff model) uses at most this many rows; every
@@ -317,6 +346,55 @@ def _rms(fit: FitResult) -> float:
     return v if math.isfinite(v) else math.inf
 
 
+def _best_of_starts(
+    data: FitData,
+    effects: tuple[str, ...],
+    starts: list[tuple[SensorParams, float]],
+    objective: str,
+    offset: bool,
+) -> FitResult:
+    """The fit from each start; the lower objective wins (the force objective has local minima)."""
+    fits = [
+        fit_channel(data, effects, p, objective=objective, fit_force_offset=offset, force_offset_n=o * offset)
+        for p, o in starts
+    ]
+    return min(fits, key=lambda f: f.cost if math.isfinite(f.cost) else math.inf)
+
+
+@dataclass(frozen=True)
+class _Pending:
+    """One objective's fits with the zero offset's fit still running (``Workers``): ``done``
+    decides on it as ``force_offset="auto"`` says."""
+
+    run: _Run
+    with_offset: Future[FitResult] | None
+    word: str
+
+    def done(self) -> _Run:
+        if self.with_offset is None:
+            return self.run
+        fit, notes = self.run.fit, list(self.run.notes)
+        with_off = self.with_offset.result()
+        e = with_off.estimate(OFFSET)
+        what = f"{e.value:+.4g} N, 95 % [{e.low:+.4g}, {e.high:+.4g}]" if e.fitted else e.note
+        a, b = fit.gap_test.force_rms_n, with_off.gap_test.force_rms_n
+        lost = sorted(set(with_off.fixed_reasons) - set(fit.fixed_reasons) - {OFFSET})
+        if lost:
+            what += f"; it leaves {', '.join(lost)} undetermined"
+        if e.fitted and not lost and _rms(with_off) < _rms(fit):
+            notes.append(
+                f"{self.word} objective: reference zero offset fitted and kept ({what}): held-out force RMS "
+                f"{a:.4g} -> {b:.4g} N (against F_ref + offset)"
+            )
+            fit = with_off
+        else:
+            notes.append(
+                f"{self.word} objective: reference zero offset fitted ({what}) and left out: held-out force "
+                f"RMS {a:.4g} N without, {b:.4g} N with it"
+            )
+        return replace(self.run, fit=fit, notes=tuple(notes))
+
+
 def _fit_objective(
     data: FitData,
     effects: tuple[str, ...],
@@ -325,9 +403,11 @@ def _fit_objective(
     force_offset: str,
     try_h: bool,
     start: _Run | None,
-) -> _Run:
+    workers: Workers,
+) -> _Pending:
     """Fit one objective, with hysteresis tried and the offset as ``force_offset`` says; a
-    run of another objective (``start``) gives the starting parameters."""
+    run of another objective (``start``) gives the starting parameters. With ``"auto"`` the
+    offset's fit is handed to ``workers``: the next objective starts from the fits before it."""
 
     def at(base: FitResult | None, **reset: float) -> tuple[SensorParams, float]:
         """A start: the prior, or a fit's parameters with the record's range (its own is shifted)."""
@@ -337,12 +417,7 @@ def _fit_objective(
         return p, base.force_offset_n
 
     def run(eff: tuple[str, ...], starts: list[tuple[SensorParams, float]], offset: bool) -> FitResult:
-        """The fit from each start; the lower objective wins (the force objective has local minima)."""
-        fits = [
-            fit_channel(data, eff, p, objective=objective, fit_force_offset=offset, force_offset_n=o * offset)
-            for p, o in starts
-        ]
-        return min(fits, key=lambda f: f.cost if math.isfinite(f.cost) else math.inf)
+        return _best_of_starts(data, eff, starts, objective, offset)
 
     word, notes, fo = OBJECTIVE_WORDS[objective], [], force_offset == "fit"
     # the force objective starts from the log-R fit and from the prior; with hysteresis, from the
@@ -366,23 +441,7 @@ def _fit_objective(
                 f"{word} objective: hysteresis tried (the record loads and unloads) and left out: held-out "
                 f"force RMS {a:.4g} N without, {b:.4g} N with it"
             )
+    with_offset = None
     if force_offset == "auto":
-        with_off = run(fit.effects, [at(fit)], True)
-        e = with_off.estimate(OFFSET)
-        what = f"{e.value:+.4g} N, 95 % [{e.low:+.4g}, {e.high:+.4g}]" if e.fitted else e.note
-        a, b = fit.gap_test.force_rms_n, with_off.gap_test.force_rms_n
-        lost = sorted(set(with_off.fixed_reasons) - set(fit.fixed_reasons) - {OFFSET})
-        if lost:
-            what += f"; it leaves {', '.join(lost)} undetermined"
-        if e.fitted and not lost and _rms(with_off) < _rms(fit):
-            notes.append(
-                f"{word} objective: reference zero offset fitted and kept ({what}): held-out force RMS "
-                f"{a:.4g} -> {b:.4g} N (against F_ref + offset)"
-            )
-            fit = with_off
-        else:
-            notes.append(
-                f"{word} objective: reference zero offset fitted ({what}) and left out: held-out force "
-                f"RMS {a:.4g} N without, {b:.4g} N with it"
-            )
-    return _Run(fit, before, plain, with_h, tuple(notes))
+        with_offset = workers.submit(_best_of_starts, data, fit.effects, [at(fit)], objective, True)
+    return _Pending(_Run(fit, before, plain, with_h, tuple(notes)), with_offset, word)

@@ -88,17 +88,11 @@ class Score:
     n_parameters: int
     dynamic: bool
 
-    @property
-    def hold_drift_pct_fs(self) -> float:
-        """The larger of the two groups' drifts (% FS; NaN without a held-out hold)."""
-        values = [v for v in self.drift.all_pct_fs if math.isfinite(v)]
-        return max(values) if values else math.nan
-
     def as_dict(self, writable: bool) -> dict[str, Any]:
         return {
             "name": self.name,
             "held_out_force_rms_n": _none_if_nan(self.held_out_force_rms_n),
-            "hold_drift_pct_fs": _none_if_nan(self.hold_drift_pct_fs),
+            "hold_drift_pct_fs": _none_if_nan(self.drift.worst_pct_fs),
             "hold_drift_after_higher_pct_fs": _none_if_nan(self.drift.after_higher_pct_fs),
             "hold_drift_others_pct_fs": _none_if_nan(self.drift.others_pct_fs),
             "holds": {"after_higher": self.drift.after_higher_holds, "others": self.drift.other_holds},
@@ -168,7 +162,7 @@ class Calibration:
     @property
     def hold_drift_pct_fs(self) -> Mapping[str, float]:
         """Per calibration name: the larger of its two held-out hold drifts (% FS)."""
-        return {s.name: s.hold_drift_pct_fs for s in self.scores}
+        return {s.name: s.drift.worst_pct_fs for s in self.scores}
 
     def force_rms(self) -> dict[str, float]:
         """Held-out force RMS (N) of every calibration, by name."""

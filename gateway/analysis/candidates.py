@@ -92,12 +92,6 @@ class Candidate:
     force_n: FloatArray = field(repr=False)  # the tracked force on every row of the data
 
     @property
-    def hold_drift_pct_fs(self) -> float:
-        """The larger of the two groups' hold drifts (% FS; NaN without a held-out hold)."""
-        values = [v for v in self.drift.all_pct_fs if math.isfinite(v)]
-        return max(values) if values else math.nan
-
-    @property
     def kind(self) -> str:
         return self.channel.curve.kind
 

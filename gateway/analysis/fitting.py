@@ -392,10 +392,11 @@ def _correlation(jac: FloatArray, k: int) -> FloatArray:
 
 
 def invert_drift_corrected(data: FitData, effects: Iterable[str], params: SensorParams) -> FloatArray:
-    """Each measured resistance inverted with the model, carrying the creep state."""
+    """Each measured resistance inverted with the model, carrying the creep state from the
+    equilibrium at the record's first load (as ``apply`` and the gateway start)."""
     model = SensorModel(tuple(effects), replace(params, force_min_n=min(params.force_min_n, 0.01)))
     temp = None if data.temperature_c is None else data.temperature_c[:, None]
-    inv, _ = model.track_series(data.resistance_ohm[:, None], data.time_s, temperature_c=temp)
+    inv, _ = model.track_series(data.resistance_ohm[:, None], data.time_s, model.unknown_state(), temp)
     f = inv.force_n[:, 0]
     return np.asarray(np.where(inv.status[:, 0] == ForceStatus.INVALID, np.nan, f))
 

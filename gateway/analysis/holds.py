@@ -246,6 +246,12 @@ class DriftGroups:
     def all_pct_fs(self) -> tuple[float, float]:
         return self.after_higher_pct_fs, self.others_pct_fs
 
+    @property
+    def worst_pct_fs(self) -> float:
+        """The larger of the two groups' drifts (% FS; NaN without a hold)."""
+        values = [v for v in self.all_pct_fs if math.isfinite(v)]
+        return max(values) if values else math.nan
+
 
 def drift_groups_pct(drifts: tuple[HoldDrift, ...], full_scale_n: float) -> DriftGroups:
     """``drifts`` in two groups: the RMS of their changes, % of ``full_scale_n``."""

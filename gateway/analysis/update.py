@@ -98,11 +98,14 @@ class PhysicsChannel:
             return np.asarray(model.invert_static(r[:, None]).force_n[:, 0])
 
     def track(self, resistance_ohm: FloatArray, time_s: FloatArray) -> FloatArray:
-        """The drift-corrected force (N) over a series, as the physical model tracks it."""
+        """The drift-corrected force (N) over a series, as the physical model tracks it: from the
+        equilibrium at the series' first load (its history before is not known)."""
         model = SensorModel(self.effects, [self.params])
         r = np.asarray(resistance_ohm, dtype=np.float64) * self.gain
         with np.errstate(all="ignore"):
-            inv, _ = model.track_series(r[:, None], np.asarray(time_s, dtype=np.float64))
+            inv, _ = model.track_series(
+                r[:, None], np.asarray(time_s, dtype=np.float64), model.unknown_state()
+            )
         return np.asarray(inv.force_n[:, 0])
 
     def scaled_params(self) -> dict[str, float]:

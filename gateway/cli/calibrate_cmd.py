@@ -108,6 +108,13 @@ from .common import parse_assignments
     help="with --install: drop the configuration's keys that contradict the calibration (a channel's or "
     "the device's parameter or effects); without it they are listed and nothing is installed",
 )
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=None,
+    metavar="N",
+    help="processes a calibration may use (default: every core); the result is the same with any",
+)
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object and nothing else")
 @click.option("--force", "overwrite", is_flag=True, help="replace --out even if it is not a calibration file")
 def calibrate_cmd(
@@ -127,6 +134,7 @@ def calibrate_cmd(
     install_path: Path | None,
     device_name: str | None,
     replace_overrides: bool,
+    jobs: int | None,
     as_json: bool,
     overwrite: bool,
 ) -> None:
@@ -203,6 +211,7 @@ def calibrate_cmd(
                     metadata=record.metadata,
                     objective=OBJECTIVE_OPTIONS[objective],
                     force_offset=force_offset,
+                    jobs=jobs,
                 )
             )
         except ValueError as exc:

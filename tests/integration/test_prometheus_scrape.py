@@ -102,7 +102,8 @@ def test_prometheus_scrapes_gateway_and_sees_the_device_go_down(tmp_path: Path, 
 
     scenario = tmp_path / "constant.toml"
     scenario.write_text(
-        'name = "constant"\n[[load]]\nchannels = "all"\nsteps = [ { hold_s = 3600, force_n = 2.0 } ]\n'
+        'name = "constant"\nsettled = true\n'
+        '[[load]]\nchannels = "all"\nsteps = [ { hold_s = 3600, force_n = 2.0 } ]\n'
     )
     procs.start(
         "sim",

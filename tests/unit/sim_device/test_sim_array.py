@@ -41,6 +41,19 @@ def test_held_force_follows_the_paper_model_and_the_spec_table() -> None:
     assert drop == pytest.approx(0.131, abs=5e-4)  # "R drop after 600 s hold": 13.1 %
 
 
+def test_a_settled_scenario_starts_where_a_held_load_ends_and_does_not_drift() -> None:
+    """``settled``: the load was carried long before t = 0; the resistance is the spec's
+    after-600-s value (13.1 % below 46.9 kohm, the creep all but done: tau = mu1 / E1 = 100 s)
+    from the first sample on, and stays."""
+    clock = Clock()
+    array = make(clock, scenario=Scenario.constant(2.0, settled=True))
+    r0 = array.latest().true_resistance_ohm[0, 0]
+    assert r0 == pytest.approx(46.9e3 * (1.0 - 0.131), rel=3e-3)
+    clock.now_s = 600.0
+    array.advance()
+    assert array.latest().true_resistance_ohm[0, 0] == pytest.approx(r0, rel=1e-12)
+
+
 def test_measured_resistance_is_eq18_of_the_counts() -> None:
     clock = Clock()
     array = make(clock, scenario=Scenario.constant(3.0), noise_lsb_rms=2.0, param_spread=True)

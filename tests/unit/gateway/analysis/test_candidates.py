@@ -249,10 +249,10 @@ def test_rank_candidates_finds_the_creep_it_was_made_with() -> None:
     static = by_name["power_law + static"]
     assert best.held_out_force_rms_n < 0.5 * static.held_out_force_rms_n
     assert creep.held_out_force_rms_n < 0.5 * static.held_out_force_rms_n
-    assert best.hold_drift_pct_fs < 1.0 and creep.hold_drift_pct_fs < 1.0
+    assert best.drift.worst_pct_fs < 1.0 and creep.drift.worst_pct_fs < 1.0
     share = static_hold_drift_pct()
     assert share == pytest.approx(5.05, abs=0.01)  # the creep's share, by hand (above)
-    assert static.hold_drift_pct_fs > 0.8 * share
+    assert static.drift.worst_pct_fs > 0.8 * share
     # every candidate read every row of the record, tracked
     assert all(c.force_n.shape == data.time_s.shape for c in ranked)
 

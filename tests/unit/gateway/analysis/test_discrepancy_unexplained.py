@@ -356,5 +356,5 @@ def test_the_rule_is_checked_again_where_the_model_changes(monkeypatch: pytest.M
     assert not tracked_violations(report)
     first = report.steps[0]
     worst = max(first.candidates, key=lambda c: c.gap_test.force_rms_n)
-    assert worst.gap_test.force_rms_n > first.tracked_before  # leakage reads it worse here
-    assert first.added is None and "not added after all: leakage refused" in first.evidence
+    assert worst.gap_test.force_rms_n > first.tracked_before  # the worst candidate reads it worse
+    assert first.added is None and f"not added after all: {worst.effect} refused" in first.evidence

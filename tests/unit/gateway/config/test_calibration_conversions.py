@@ -158,7 +158,7 @@ def test_calibrate_model_line_file_reads_through_the_processor(tmp_path: Path) -
     )
     r = np.array([r_line, r_phys[0]])
     counts = dev.front_end.counts(dev.front_end.output_voltage(r))
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 0.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts), 0.0, 0.0)
     assert [ChannelStatus(s).label for s in snap.status] == ["ok", "ok"]
     # through the ADC: the reading is the line at the quantized resistance
     r_read = dev.front_end.resistance(counts)[0][0]

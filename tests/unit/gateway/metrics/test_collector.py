@@ -74,7 +74,7 @@ def _snapshot() -> GatewaySnapshot:
     counts = div.counts(div.output_voltage(r))
     counts[2] = 0  # open
     counts[3] = 3  # no contact
-    snap, _ = proc.process(proc.initial_state(), RawSample(counts=counts), 1_700_000_000.0, 0.0)
+    snap, _ = proc.process(proc.rested_state(), RawSample(counts=counts), 1_700_000_000.0, 0.0)
     other = DeviceProcessor(_device("right", 2), "bus1", 0.2)
     stale, _ = other.stale(other.initial_state(), 1_700_000_001.0, "timeout")
     tally = Tally()
