@@ -205,3 +205,29 @@ def test_cli_starts_from_the_best_static_form_and_takes_a_curve_baseline(tmp_pat
     assert "step 1: model line + static" in result.output and "started from" not in result.output
     result = CliRunner().invoke(main, ["discrepancy", str(rec), "--baseline", "line,creep"])
     assert result.exit_code == 2 and "a static curve baseline is one curve kind alone" in result.output
+
+
+def test_a_curve_with_drift_terms_reading_far_better_leaves_a_residual_whatever_the_log_r() -> None:
+    """The clean record's final model (power law + creep, within 2 x the noise floor, no trend):
+    an alternative that reads held-out force more than 1.5 x better means the record carries
+    dynamics the model lacks (a real FSR: the physical model 1.37 N, a line with two creep
+    elements and hysteresis 0.54 N); a static alternative, or one only a little better, does not."""
+    channel, metadata = clean_record(1)
+    data, _, _ = prepare(channel, metadata, None)
+    ranked = rank_candidates(data, kinds=("power_law",), forms=("creep",))
+    fit = curve_fit(data, ranked[0], ("creep",))
+    floor = (
+        float(np.sqrt(np.mean(data.sigma_log[data.test] ** 2))) if data.sigma_log is not None else math.nan
+    )
+    mine = fit.gap_test.force_rms_n
+    statics = [("power_law + static", 10.0 * mine)]
+    plain = assess_residual(data, fit, floor, statics, [("line + creep", 0.8 * mine)])
+    assert not plain.remains, plain.reasons
+    far = assess_residual(data, fit, floor, statics, [("line + creep2+hysteresis", mine / 2.5)])
+    assert far.remains
+    assert any("line + creep2+hysteresis's" in r and "carries dynamics" in r for r in far.reasons), (
+        far.reasons
+    )
+    # a static alternative is judged as a static rival, not as dynamics the model lacks
+    static_only = assess_residual(data, fit, floor, statics, [("lookup + static", mine / 2.5)])
+    assert not any("carries dynamics" in r for r in static_only.reasons)
