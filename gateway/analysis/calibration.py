@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -114,6 +114,7 @@ def calibrate(
     objective: Objective | str = Objective.AUTO,
     force_offset: OffsetMode | str = OffsetMode.AUTO,
     jobs: int | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> Calibration:
     """Fit the model and its rivals to one channel of a record.
 
@@ -123,11 +124,25 @@ def calibrate(
     ``"fit"`` fits a reference zero offset, ``"auto"`` fits it and keeps it only if it lowers the
     held-out force RMS, ``"none"`` leaves it out. Held-out force errors of a fit with an offset
     are against F_ref + offset (the same as F_inv - offset against F_ref). ``jobs``: the
-    processes it may use (``parallel.Workers``; default every core), the same result with any."""
+    processes it may use (``parallel.Workers``; default every core), the same result with any.
+    ``progress`` is told each stage as it starts (a few words), for a long calibration."""
     with Workers(jobs) as workers:
         return _calibrate(
-            channel, effects, prior, record_name, metadata, try_hysteresis, objective, force_offset, workers
+            channel,
+            effects,
+            prior,
+            record_name,
+            metadata,
+            try_hysteresis,
+            objective,
+            force_offset,
+            workers,
+            progress or _quiet,
         )
+
+
+def _quiet(stage: str) -> None:
+    """No progress shown."""
 
 
 def _calibrate(
@@ -140,6 +155,7 @@ def _calibrate(
     objective: Objective | str,
     force_offset: OffsetMode | str,
     workers: Workers,
+    say: Callable[[str], None],
 ) -> Calibration:
     objective = choice_of(Objective, objective, "objective")
     force_offset = choice_of(OffsetMode, force_offset, "force_offset")
@@ -194,12 +210,14 @@ def _calibrate(
             f"the physical model fitted on every {math.ceil(data.time_s.size / PHYSICS_FIT_ROWS)}th of those "
             f"rows ({physics_data.time_s.size}); it is scored on all of them, as the gateway reads it"
         )
+    say(f"physical model, log-R objective ({physics_data.time_s.size} rows)")
     pending = [_fit_objective(physics_data, chosen, ranged, "log_r", force_offset, try_h, None, workers)]
     if objective != Objective.LOG_R:
         lookup_n = Rivals.fit(data.force_n, data.resistance_ohm, data.train, data.test).lookup_force_rms_n
         # in contention by the log-R fit before its zero offset (the force objective starts there)
         log_r_n = pending[0].run.fit.gap_test.force_rms_n
         if objective == Objective.FORCE or not log_r_n > CONTENTION_FACTOR * lookup_n:
+            say("physical model, force objective")
             pending.append(
                 _fit_objective(
                     physics_data, chosen, ranged, "force", force_offset, try_h, pending[0].run, workers
@@ -274,6 +292,7 @@ def _calibrate(
     )
     # the physical model read back (its written parameters and ranges only) while the curves fit
     read_back = workers.submit(physics_read_back, cal, small, meta)
+    say("curves x drift forms, and the physical model read back as the gateway reads it")
     cands = tuple(rank_candidates(data, real_time=time_is_real(meta), range_n=rival_range))
     scores += [
         Score(c.name, c.held_out_force_rms_n, c.drift, c.n_parameters, c.channel.drift.active) for c in cands

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import sys
+import time
 from pathlib import Path
 
 import click
@@ -115,6 +117,12 @@ from .common import parse_assignments
     metavar="N",
     help="processes a calibration may use (default: every core); the result is the same with any",
 )
+@click.option(
+    "--progress/--no-progress",
+    default=None,
+    help="show each stage of a long calibration on stderr (default: when stderr is a terminal and "
+    "without --json)",
+)
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object and nothing else")
 @click.option("--force", "overwrite", is_flag=True, help="replace --out even if it is not a calibration file")
 def calibrate_cmd(
@@ -135,6 +143,7 @@ def calibrate_cmd(
     device_name: str | None,
     replace_overrides: bool,
     jobs: int | None,
+    progress: bool | None,
     as_json: bool,
     overwrite: bool,
 ) -> None:
@@ -200,7 +209,9 @@ def calibrate_cmd(
             "to write"
         )
     results = []
-    for ch in channels:
+    show = (sys.stderr.isatty() and not as_json) if progress is None else progress
+    for k, ch in enumerate(channels, start=1):
+        stages = Progress(f"channel {ch.name!r} ({k}/{len(channels)})") if show else None
         try:
             results.append(
                 calibrate(
@@ -212,10 +223,13 @@ def calibrate_cmd(
                     objective=OBJECTIVE_OPTIONS[objective],
                     force_offset=force_offset,
                     jobs=jobs,
+                    progress=stages,
                 )
             )
         except ValueError as exc:
             raise click.ClickException(str(exc)) from None
+        if stages is not None:
+            stages("done")
     if out_path is not None:
         try:
             write_calibration(out_path, results, model, rename)
@@ -321,6 +335,17 @@ def update_calibration(
     for u in updates:
         click.echo(u.describe())
     click.echo(f"wrote {target}")
+
+
+class Progress:
+    """A calibration's stages on stderr, one line each, with the time since it started."""
+
+    def __init__(self, what: str) -> None:
+        self.what = what
+        self.start_s = time.monotonic()
+
+    def __call__(self, stage: str) -> None:
+        click.echo(f"[{time.monotonic() - self.start_s:5.1f} s] {self.what}: {stage}", err=True)
 
 
 def ch_record(record: object, name: str) -> object:

@@ -25,3 +25,25 @@ def test_out_into_a_missing_folder_is_one_line(tmp_path: Path) -> None:
     )
     assert result.exit_code == 2 and "directory" in result.output and "does not exist" in result.output
     assert "Traceback" not in result.output
+
+
+THICK = Path(__file__).resolve().parents[3] / "data" / "real" / "tams_thick.csv"
+
+
+def test_progress_names_each_stage_on_stderr_and_json_stays_clean(tmp_path: Path) -> None:
+    out = tmp_path / "cal.toml"
+    shown = CliRunner().invoke(
+        main, ["calibrate", str(THICK), "--as", "pad", "--out", str(out), "--progress"]
+    )
+    assert shown.exit_code == 0, shown.output
+    lines = [line for line in shown.stderr.splitlines() if line.startswith("[")]
+    stages = [line.split(": ", 1)[1] for line in lines]
+    assert stages[0].startswith("physical model, log-R objective (")
+    assert stages[-1] == "done" and any(s.startswith("curves x drift forms") for s in stages)
+    assert all("channel '0' (1/1)" in line for line in lines)
+    seconds = [float(line[1 : line.index(" s]")]) for line in lines]
+    assert seconds == sorted(seconds)
+    # not a terminal (the runner's stderr), and --json: no progress, one JSON object on stdout
+    quiet = CliRunner().invoke(main, ["calibrate", str(THICK), "--as", "pad", "--json"])
+    assert quiet.exit_code == 0 and not any(line.startswith("[") for line in quiet.stderr.splitlines())
+    assert quiet.stdout.lstrip().startswith("{")
