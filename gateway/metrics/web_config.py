@@ -15,7 +15,8 @@ A YAML file in the Prometheus exporter-toolkit format (the subset the gateway su
 
 ``load_web_config`` validates it (``ConfigError`` naming the file and key), as ``run`` and
 ``check-config`` both use it: the TLS key must be private to its owner (like web.yml) and
-every hash must be a bcrypt hash that bcrypt accepts. ``BasicAuth`` checks an
+every hash must be a bcrypt hash that bcrypt accepts, at a cost of ``MIN_BCRYPT_COST`` (4) to
+``MAX_BCRYPT_COST`` (12). ``BasicAuth`` checks an
 ``Authorization`` header against the bcrypt hashes (a verified pair is cached). An unknown
 user costs one bcrypt check at the highest cost of the configured hashes, as a wrong password
 for a real one does (a user whose hash is cheaper has its "no" padded with dummy checks to the
@@ -56,6 +57,12 @@ _TLS_VERSIONS = {"TLS12": ssl.TLSVersion.TLSv1_2, "TLS13": ssl.TLSVersion.TLSv1_
 _BCRYPT_HASH = re.compile(r"\$2[aby]\$(\d\d)\$[./A-Za-z0-9]{53}")
 #: bcrypt uses the first 72 bytes of a password; the rest never counted
 BCRYPT_MAX_PASSWORD_BYTES = 72
+#: the costs (log2 rounds) a hash may have: bcrypt's lowest, and one whose check takes about
+#: 0.3 s on one core. Each step doubles a check: at 16 a wrong password costs 4 s, so a few
+#: queued guesses hold unverified scrapers past their timeout, and a stop waits for a running
+#: check (about 32 h at bcrypt's own limit of 31)
+MIN_BCRYPT_COST = 4
+MAX_BCRYPT_COST = 12
 #: an HTTP header name: an RFC 9110 token
 _HEADER_NAME = re.compile(r"[!#$%&'*+\-.^_`|~0-9A-Za-z]+")
 _HEADER_NAME_RULE = "letters, digits and !#$%&'*+-.^_`|~ (an HTTP token), e.g. X-Frame-Options"
@@ -153,8 +160,14 @@ def _check_hash(path: Path, user: str, hashed: object) -> bytes:
             f"of salt and hash; every login would fail), {hint}",
         )
     cost = int(hashed[4:6])
-    if not 4 <= cost <= 31:
-        raise _web_error(path, where, f"bcrypt cost {cost} for user {user!r} is out of range (4..31)")
+    if not MIN_BCRYPT_COST <= cost <= MAX_BCRYPT_COST:
+        raise _web_error(
+            path,
+            where,
+            f"bcrypt cost {cost} for user {user!r} is out of range (allowed: {MIN_BCRYPT_COST}.."
+            f"{MAX_BCRYPT_COST}; each step doubles the work of every login, and {MAX_BCRYPT_COST} takes "
+            f"about 0.3 s), {hint}",
+        )
     # the same salt at the lowest cost: does bcrypt accept it (salt bits)? ~1 ms, not a login
     try:
         bcrypt.checkpw(b"", f"$2b$04${hashed[7:]}".encode())
