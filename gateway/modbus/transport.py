@@ -178,7 +178,8 @@ class Transport(abc.ABC):
         except (OSError, ValueError) as exc:
             await self.close()
             raise DeviceConnectionError(f"bus {self.name!r}: cannot connect to {self.target}: {exc}") from exc
-        log.info("bus %s: connected to %s", self.name, self.target)
+        # the poll loop says when it connects (not at every reconnect of a device that drops)
+        log.debug("bus %s: connected to %s", self.name, self.target)
 
     async def close(self) -> None:
         """Close the connection; safe to call at any time and more than once."""

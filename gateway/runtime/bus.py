@@ -20,7 +20,10 @@ Failure handling:
   after a jittered back-off that grows per failure, so a dead device costs its bus little;
 * a lost or refused connection closes the transport and reconnects after
   ``uniform(0, b)`` seconds ("full jitter"), b doubling from ``backoff_initial_s`` to
-  ``backoff_max_s``: no busy loop and no synchronized reconnect storm;
+  ``backoff_max_s``: no busy loop and no synchronized reconnect storm. b starts again from
+  ``backoff_initial_s`` only once a poll succeeds, not at a mere connect: a device that takes
+  the connection (and the set-up writes) and then drops it is written to ever less often,
+  down to once per ``backoff_max_s / 2`` on average;
 * buses are independent tasks, so nothing on one bus can stall another;
 * nothing a device sends can end a bus task: every unexpected error is logged, counted
   as a decode error and the loop goes on.
@@ -34,10 +37,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import random
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
 
 from ..config import BusConfig, DeviceConfig
@@ -83,6 +85,11 @@ def error_reason(exc: BaseException) -> str:
     return "decode"
 
 
+def _power_of_two(n: int) -> bool:
+    """Whether ``n`` is 1, 2, 4, 8...: when a repeated failure is logged again."""
+    return n > 0 and n & (n - 1) == 0
+
+
 @dataclass
 class DeviceRunner:
     """Mutable bookkeeping of one device inside its bus task (never shared across threads)."""
@@ -122,6 +129,8 @@ class BusWorker:
         monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         self.bus = bus
+        #: how the loop waits between cycles and before a reconnect (tests simulate time)
+        self.sleep: Callable[[float], Awaitable[None]] = asyncio.sleep
         self.runners = runners
         self._publish = publish
         self._derivations = derivations
@@ -132,7 +141,9 @@ class BusWorker:
         self._mono = monotonic
         self.task: asyncio.Task[None] | None = None
         self._stopping = False
-        self.connect_failures = 0
+        self.connect_failures = 0  # connects refused in a row (for the log)
+        #: connections refused or lost since the last successful poll: the reconnect back-off
+        self.failed_connections = 0
 
     @property
     def name(self) -> str:
@@ -143,8 +154,12 @@ class BusWorker:
         """Full-jitter back-off: uniform(0, min(max, initial * 2^(failures-1))), with a
         floor of a tenth of ``backoff_initial_s`` so it can never spin."""
         initial = float(self.bus.backoff_initial_s)
-        cap = min(float(self.bus.backoff_max_s), initial * 2.0 ** min(max(failures - 1, 0), 30))
-        return max(0.1 * initial, self._rng.uniform(0.0, cap))
+        return max(0.1 * initial, self._rng.uniform(0.0, self._backoff_cap(failures)))
+
+    def _backoff_cap(self, failures: int) -> float:
+        """The upper end of the back-off after ``failures`` failures in a row (s)."""
+        initial = float(self.bus.backoff_initial_s)
+        return min(float(self.bus.backoff_max_s), initial * 2.0 ** min(max(failures - 1, 0), 30))
 
     # ------------------------------------------------------------------ requests
     async def _read(self, runner: DeviceRunner, req: ReadRequest) -> list[int]:
@@ -290,6 +305,7 @@ class BusWorker:
         runner.failures = 0
         runner.next_attempt = 0.0
         runner.last_error = None
+        self.failed_connections = 0
         runner.tally.poll(conversion.duration_s)
         self._publish(runner, snap)
 
@@ -386,18 +402,29 @@ class BusWorker:
             await self.transport.connect()
         except DeviceConnectionError as exc:
             self.connect_failures += 1
+            self.failed_connections += 1
             for runner in self.runners:
                 self.settle_now(runner)
                 runner.tally.read()
                 runner.tally.error("connection")
                 self._fail_quiet(runner, exc)
-            if self.connect_failures == 1 or math.log2(self.connect_failures).is_integer():
+            if _power_of_two(self.connect_failures):
                 log.warning(
                     "bus %s: %s (attempt %d)", self.name, self._unprefixed(str(exc)), self.connect_failures
                 )
             return False
         if self.connect_failures:
             log.info("bus %s: reconnected after %d failed attempts", self.name, self.connect_failures)
+        elif self.failed_connections == 0:
+            log.info("bus %s: connected to %s", self.name, self.transport.target)
+        elif _power_of_two(self.failed_connections):
+            log.warning(
+                "bus %s: connected again, but %d connection(s) in a row were lost before a poll "
+                "succeeded; the next reconnect waits up to %g s",
+                self.name,
+                self.failed_connections,
+                self._backoff_cap(self.failed_connections + 1),
+            )
         self.connect_failures = 0
         for runner in self.runners:
             runner.next_attempt = 0.0
@@ -425,6 +452,7 @@ class BusWorker:
                         continue
                     await self.poll_device(runner)
                 except DeviceConnectionError:
+                    self.failed_connections += 1
                     await self.transport.close()
                     return
         finally:
@@ -446,11 +474,12 @@ class BusWorker:
                 raise
             except Exception:  # the loop must survive anything
                 log.exception("bus %s: unexpected error in the poll cycle", self.name)
+                self.failed_connections += 1
                 with contextlib.suppress(Exception):
                     await self.transport.close()
             now = self._mono()
             if not self.transport.connected:
-                delay = self._jitter(self.connect_failures or 1)
+                delay = self._jitter(self.failed_connections or 1)
                 next_cycle = now + delay
             else:
                 next_cycle += interval
@@ -463,7 +492,7 @@ class BusWorker:
                 self.settle_all()
                 # the conversions just run took time of their own: wake at next_cycle, not
                 # that much after it (which would make every cycle late by its conversions)
-                await asyncio.sleep(max(0.0, next_cycle - self._mono()))
+                await self.sleep(max(0.0, next_cycle - self._mono()))
                 back_to_back = 0
             else:
                 # a cycle that waited on a device has let the loop run; one that never waited

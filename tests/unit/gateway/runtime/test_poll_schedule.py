@@ -17,7 +17,6 @@ import pytest
 from gateway.config import bus_config_for, device_config_for, gateway_config_for
 from gateway.modbus.virtual import VirtualDevice, VirtualTransport
 from gateway.model import SensorParams
-from gateway.runtime import bus as bus_module
 from gateway.runtime.poller import Poller
 
 INTERVAL_S = 0.1
@@ -67,7 +66,7 @@ async def test_cycles_start_on_schedule_however_long_conversions_take(
 
     monkeypatch.setattr(worker, "poll_cycle", cycle)
     monkeypatch.setattr(worker, "settle_all", slow_settle)
-    monkeypatch.setattr(bus_module.asyncio, "sleep", sleep)
+    monkeypatch.setattr(worker, "sleep", sleep)
     worker.start()
     try:
         await asyncio.wait_for(enough.wait(), 10.0)
