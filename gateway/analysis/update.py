@@ -45,6 +45,7 @@ from scipy.optimize import least_squares
 
 from ..atomic import atomic_write_text
 from ..config.calibration_file import calibration_effects, load_calibration, replace_table, set_table_values
+from ..config.tables import read_text_file
 from ..errors import ConfigError
 from ..model import SensorModel, SensorParams
 from ..model.calibrated import CurveChannel, channel_from_table
@@ -346,7 +347,10 @@ def rewrite_sensitivity(text: str, updates: Mapping[str, Calibrated]) -> str:
 def write_updated(path: Path, out_path: Path, updates: Mapping[str, Calibrated]) -> None:
     """Write ``path`` with the updated sensitivities to ``out_path`` (may be ``path``), atomically;
     the rewrite must read back, with the gateway's checks, to the updated channels."""
-    text = path.read_text(encoding="utf-8-sig")
+    try:  # a regular file, never a FIFO waited on
+        text = read_text_file(path, "calibration file").lstrip("\ufeff")
+    except ConfigError as exc:
+        raise UpdateError(str(exc)) from None
     new = rewrite_sensitivity(text, updates)
     tomllib.loads(new)
     with tempfile.TemporaryDirectory(prefix="tactile-update-") as folder:

@@ -120,9 +120,9 @@ class ParameterSources:
             self.channel_keys[entry["index"]] = list(entry.get("params", {}))
         self.calibration: dict[str, Any] = {}
         if device.calibration is not None:
-            self.calibration = tomllib.loads(device.calibration.read_text(encoding="utf-8-sig")).get(
-                "channel", {}
-            )
+            self.calibration = tomllib.loads(
+                read_text_file(device.calibration, "calibration file").lstrip("\ufeff")
+            ).get("channel", {})
 
     def of(self, channel: ChannelConfig) -> dict[str, str]:
         sources = dict.fromkeys(parameter_names(), "default")

@@ -42,9 +42,12 @@ MAX_FILE_BYTES: Final = 4 * 1024 * 1024
 
 def read_text_file(path: Path, what: str) -> str:
     """The UTF-8 text of a regular file of at most ``MAX_FILE_BYTES``; ``ConfigError`` naming
-    the file and ``what`` it is otherwise (a device such as /dev/zero is never read)."""
+    the file and ``what`` it is otherwise (a device such as /dev/zero is never read, and a named
+    pipe is refused, never waited on: the open does not block)."""
     try:
-        with open(path, "rb") as f:
+        # O_NONBLOCK: opening a FIFO with no writer would wait for one (stopping the poll loop
+        # at a reload); it has no effect on a regular file
+        with os.fdopen(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as f:
             if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
                 raise ConfigError(f"{path}: not a regular file; a {what} is a file")
             data = f.read(MAX_FILE_BYTES + 1)
