@@ -44,7 +44,7 @@ from ..runtime.processor import DeviceProcessor
 from ..runtime.replay import ChannelSeries, ReplayedChannel, replay
 from ..runtime.snapshot import STATUS_LABELS, ChannelStatus
 from .holds import EDGE_FRACTION, MIN_HOLD_S, DriftGroups, Hold, drift_groups_pct, find_holds, hold_drifts
-from .records import ChannelRecord, Record, RecordWriter, write_record
+from .records import ChannelRecord, Record, RecordWriter, names_text, write_record
 
 __all__ = [
     "APPLIED_COLUMNS",
@@ -118,7 +118,7 @@ class Applied:
 
 
 def _listing(names: Sequence[str]) -> str:
-    return ", ".join(names) if names else "none"
+    return names_text(names)
 
 
 def channel_mapping(
@@ -140,13 +140,13 @@ def channel_mapping(
     chosen = list(dict.fromkeys(selected)) or list(record_channels)
     for name, target in rename.items():
         if name not in chosen:
-            raise ApplyError(f"{name!r} is mapped but not among the channels chosen ({', '.join(chosen)})")
+            raise ApplyError(f"{name!r} is mapped but not among the channels chosen ({names_text(chosen)})")
         if target not in calibration_channels:
             raise ApplyError(f"{name!r} is mapped to {target!r}, which has no calibration table {both}")
     mapping = {name: rename.get(name, name) for name in chosen}
     missing = [name for name, target in mapping.items() if target not in calibration_channels]
     if missing:
-        shown = ", ".join(repr(m) for m in missing)
+        shown = names_text(repr(m) for m in missing)
         several = len(missing) > 1
         raise ApplyError(
             f"record channel{'s' if several else ''} {shown} {'have' if several else 'has'} no calibration "

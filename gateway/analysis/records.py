@@ -108,7 +108,7 @@ class Record:
         if name is None:
             if len(self.channels) == 1:
                 return next(iter(self.channels.values()))
-            names = ", ".join(self.channels)
+            names = names_text(self.channels)
             raise RecordError(
                 f"{self._where()}: the record has {len(self.channels)} channels ({names}); "
                 "choose one with --channel NAME"
@@ -119,7 +119,7 @@ class Record:
             close = difflib.get_close_matches(name, list(self.channels), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""
             raise RecordError(
-                f"{self._where()}: no channel {name!r}{hint} (channels: {', '.join(self.channels)})"
+                f"{self._where()}: no channel {name!r}{hint} (channels: {names_text(self.channels)})"
             )
         return self.channels[name]
 
@@ -142,6 +142,43 @@ def zero_noise_tolerance_n(full_scale_n: float) -> float:
     the record's largest reference force (N)."""
     scale = full_scale_n if math.isfinite(full_scale_n) and full_scale_n > 0.0 else 0.0
     return max(ZERO_NOISE_FLOOR_N, ZERO_NOISE_SHARE * scale)
+
+
+#: A record with more channels than this is refused at the first channel past it: 16 devices of
+#: the gateway's largest (256 channels). Each channel costs its arrays and bookkeeping (about
+#: 2 kB when it has one row), so a record of a million one-row channels is not read into GBs.
+MAX_RECORD_CHANNELS = 4096
+#: How many names a message lists (``names_text``), and how much of each name it shows.
+NAMES_SHOWN = 8
+NAME_CHARS_SHOWN = 32
+
+
+def names_text(names: Iterable[str], shown: int = NAMES_SHOWN) -> str:
+    """Channel names for a message: the first ``shown``, each cut to ``NAME_CHARS_SHOWN``
+    characters, then how many more there are ("none" for no names). A message that names a
+    record's channels stays a line however many (and however long) they are."""
+    listed: list[str] = []
+    more = 0
+    for name in names:
+        if len(listed) < shown:
+            cut = NAME_CHARS_SHOWN - 3
+            listed.append(name if len(name) <= NAME_CHARS_SHOWN else f"{name[:cut]}...")
+        else:
+            more += 1
+    if not listed:
+        return "none"
+    return ", ".join(listed) + (f" and {more} more" if more else "")
+
+
+def _check_channel_count(n_channels: int, channel: str, where: str, line_no: int) -> None:
+    """Refuse a record's new channel ``channel`` (on ``line_no``) when it already has
+    ``MAX_RECORD_CHANNELS``."""
+    if n_channels >= MAX_RECORD_CHANNELS:
+        raise RecordError(
+            f"{where}:{line_no}: channel {names_text([channel])!r} makes more than {MAX_RECORD_CHANNELS} "
+            f"channels; a record holds at most {MAX_RECORD_CHANNELS} (a channel column with another "
+            "meaning, such as a sample number?)"
+        )
 
 
 #: A record file larger than this is refused (a 4-million-row record is about 200 MB): an
@@ -304,9 +341,11 @@ def _parse_record(text: str, path: Path | None, where: str, require_force: bool)
             prev_t, prev_line = last_time[channel]
             raise RecordError(
                 f"{where}:{line_no}: column {index['time_s'] + 1} (time_s): time goes backwards in channel "
-                f"{channel!r} ({t} after {prev_t} on line {prev_line})"
+                f"{names_text([channel])!r} ({t} after {prev_t} on line {prev_line})"
             )
         last_time[channel] = (t, line_no)
+        if channel not in columns:
+            _check_channel_count(len(columns), channel, where, line_no)
         store = columns.setdefault(channel, {name: array("d") for name in values})
         for name, v in values.items():
             store[name].append(v)

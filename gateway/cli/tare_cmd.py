@@ -13,7 +13,7 @@ from typing import Any, NoReturn
 import click
 import numpy as np
 
-from ..analysis.records import read_record
+from ..analysis.records import names_text, read_record
 from ..analysis.tare import (
     ChannelSeries,
     TareError,
@@ -92,7 +92,7 @@ def record_series(
     missing = [device.channels[i].name for i in wanted if i not in found]
     if missing:
         raise ValueError(
-            f"{path}: no rows of {', '.join(missing[:6])} (the record has {', '.join(record.channels)})"
+            f"{path}: no rows of {', '.join(missing[:6])} (the record has {names_text(record.channels)})"
         )
     times = np.concatenate([record.channels[found[i]].time_s for i in wanted])
     first, last = float(times.min()), float(times.max())

@@ -33,7 +33,7 @@ import click
 import numpy as np
 from prometheus_client import CollectorRegistry
 
-from ..analysis.records import ChannelRecord, Record, read_record
+from ..analysis.records import ChannelRecord, Record, names_text, read_record
 from ..config import ChannelConfig, DeviceConfig, Encoding, RegisterMap, load_config
 from ..config.layout import GridLayout
 from ..errors import ConfigError, RecordError
@@ -130,7 +130,7 @@ def _match(record: Record, device: DeviceConfig) -> list[str | None]:
     mine = [n for n in record.channels if "/" not in n or n.startswith(f"{device.name}/")]
     extra = [n for n in mine if n not in used]
     if not used or extra:
-        shown = ", ".join(extra or list(record.channels))
+        shown = names_text(extra or list(record.channels))
         raise ViewError(
             f"{record.path}: record channel(s) {shown} are not enabled channels of device "
             f"{device.name!r} ({', '.join(c.name for c in enabled)}); give the right --config / --device"
