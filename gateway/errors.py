@@ -35,6 +35,16 @@ class DecodeError(DeviceError):
     """A response could not be decoded (wrong length, garbled frame)."""
 
 
+class ShortAnswerError(DecodeError):
+    """A well-formed answer with fewer registers than the request asked for (some devices
+    answer a read that runs past the end of their map with the registers they have)."""
+
+    def __init__(self, message: str, asked: int, got: int) -> None:
+        super().__init__(message)
+        self.asked = asked
+        self.got = got
+
+
 class DeviceMismatchError(DeviceError):
     """The device answers, but is not the device the configuration describes (a product
     id, channel count or identification differs from what the configuration expects)."""

@@ -1,13 +1,13 @@
 """``tactile-gateway scan``: find where an undocumented Modbus board keeps its ADC frame.
 
-One unit, over Modbus TCP (``--host``) or RTU (``--serial``). A first pass finds the
-readable registers of the ``--input``/``--holding`` ranges: reads of at most 125 registers,
-and a read the device refuses as an illegal address (exception 2; also 3 and 4, which some
-devices answer instead) is split in halves down to single registers, so one hole does not
-hide its neighbours. Then ``--rounds`` rounds, ``--interval`` s apart, read only the
-readable registers, so that every round takes the same short time and a clock's rate
-against host time comes out right. Function 43/14 (device identification) is tried once
-at the end: a device that does not know it may drop the connection.
+One unit, over Modbus TCP (``--host``) or RTU (``--serial``). A first pass finds the readable
+registers of the ``--input``/``--holding`` ranges: reads of at most 125 registers, and a read
+the device refuses as an illegal address (exception 2; also 3 and 4, which some devices answer
+instead), or answers with fewer registers than asked, is split in halves down to single
+registers, so one hole does not hide its neighbours. Then ``--rounds`` rounds, ``--interval``
+s apart, read only the readable registers, so that every round takes the same short time and a
+clock's rate against host time comes out right. Function 43/14 (device identification) is
+tried once at the end: a device that does not know it may drop the connection.
 
 On a terminal the register table is redrawn every round, registers that changed since the
 previous round in reverse video; otherwise the final table is printed once, registers that
@@ -202,7 +202,7 @@ def scan(
 ) -> None:
     """Read register ranges of an unknown device repeatedly and suggest its map.
 
-    Finds the readable registers (refused reads are split down to single registers), reads
+    Finds the readable registers (refused and short reads are split down to single registers), reads
     them --rounds times, then lists ADC frame candidates, clocks, constant registers, the
     device identification and a configuration snippet. Only reads: never writes to the
     device. Exit status 1 if the device cannot be reached or does not answer.

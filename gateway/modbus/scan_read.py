@@ -2,11 +2,13 @@
 
 A first pass finds the readable registers of the requested ranges: reads of at most 125
 registers, and a read the device refuses as an illegal address (exception 2; also 3 and 4,
-which some devices answer instead) is split in halves down to single registers, so one hole
-does not hide its neighbours. Then ``rounds`` rounds, ``interval_s`` apart, read only the
-readable registers, so that every round takes the same short time and a clock's rate against
-host time comes out right. Function 43/14 (device identification) is tried once at the end.
-The snapshots go to ``gateway.modbus.scan`` for analysis.
+which some devices answer instead), or answers with fewer registers than asked (a device that
+stops at the end of its map, or reads at most so many at once), is split in halves down to
+single registers, so one hole does not hide its neighbours. The registers of a short answer
+are not used: which addresses they are is not said. Then ``rounds`` rounds, ``interval_s``
+apart, read only the readable registers, so that every round takes the same short time and a
+clock's rate against host time comes out right. Function 43/14 (device identification) is
+tried once at the end. The snapshots go to ``gateway.modbus.scan`` for analysis.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from ..errors import DeviceError, DeviceExceptionResponse, DeviceTimeoutError
+from ..errors import DeviceError, DeviceExceptionResponse, DeviceTimeoutError, ShortAnswerError
 from .register_map import MAX_READ_REGISTERS, RegisterKind
 from .scan import Snapshot
 from .transport import Transport
@@ -102,10 +104,10 @@ class TableReader:
                 raise _TableUnsupported from exc
             if exc.exception_code not in BISECT_CODES:
                 raise
-            if count > 1:
-                half = count // 2
-                await self._read_span(start, half, found)
-                await self._read_span(start + half, count - half, found)
+            await self._split(start, count, found)
+            return
+        except ShortAnswerError:
+            await self._split(start, count, found)
             return
         except DeviceTimeoutError as exc:
             if self._answered and not self._discovered:
@@ -116,6 +118,14 @@ class TableReader:
             raise
         self._answered += 1
         found.update(zip(range(start, start + count), values, strict=True))
+
+    async def _split(self, start: int, count: int, found: dict[int, int]) -> None:
+        """Read a span the device would not answer whole in two halves (a single register it
+        will not answer is unreadable)."""
+        if count > 1:
+            half = count // 2
+            await self._read_span(start, half, found)
+            await self._read_span(start + half, count - half, found)
 
 
 async def _read_round(readers: Sequence[TableReader]) -> Registers:

@@ -45,6 +45,7 @@ from ..errors import (
     DeviceConnectionError,
     DeviceTimeoutError,
     GatewayError,
+    ShortAnswerError,
     WriteNotAllowedError,
 )
 from .plan import ReadRequest
@@ -242,7 +243,9 @@ class Transport(abc.ABC):
             except Exception as exc:
                 raise self._map_error(what, exc) from exc
         if len(registers) != count:
-            raise DecodeError(f"{what}: asked for {count} registers, got {len(registers)}")
+            raise ShortAnswerError(
+                f"{what}: asked for {count} registers, got {len(registers)}", count, len(registers)
+            )
         if not self.values_are_16_bit and (min(registers) < 0 or max(registers) > 0xFFFF):
             raise DecodeError(f"{what}: a register value outside 0..65535")
         return registers if type(registers) is list else list(registers)

@@ -17,6 +17,7 @@ from click.testing import CliRunner, Result
 
 from gateway.cli import main, scan_cmd, scan_report, scan_table
 from gateway.cli.scan_cmd import LiveView, ScanEndpoint, parse_ranges, render_table, scan_device
+from gateway.errors import DeviceExceptionResponse
 from gateway.modbus import scan_read
 from gateway.modbus.endpoint import Endpoint
 from gateway.modbus.transport import Transport
@@ -298,3 +299,63 @@ def test_the_command_calls_read_functions_only() -> None:
         names |= {n.id for n in ast.walk(tree) if isinstance(n, ast.Name)}
     assert not {n for n in names if n.startswith("write_") or n.startswith("_write")}
     assert {"read_registers", "read_device_identification"} <= names
+
+
+class ShortBoard(Board):
+    """A board that answers a read with fewer registers than asked, without an exception: the
+    registers it has in a row from the first one asked (``end_of_map``), or at most ``cap``
+    of them. A read whose first register it does not have answers exception 2."""
+
+    def __init__(self, cap: int | None = None) -> None:
+        super().__init__()
+        self.cap = cap
+
+    async def _read(self, kind: str, device_id: int, address: int, count: int, what: str) -> Sequence[int]:
+        image = self.device.input if kind == "input" else self.device.holding
+        have = 0
+        while have < count and address + have in image:
+            have += 1
+        if self.cap is not None:
+            have = min(have, self.cap)
+        self._move()
+        self.requests.append((kind, device_id, address, count))
+        if not have:
+            raise DeviceExceptionResponse(f"{what}: device answered exception 2 (illegal data address)", 2)
+        return [image[a] for a in range(address, address + have)]
+
+
+@pytest.fixture
+def short_board(monkeypatch: pytest.MonkeyPatch) -> ShortBoard:
+    bus = ShortBoard()
+    monkeypatch.setattr(scan_cmd, "transport_factory", lambda _endpoint: bus)
+    return bus
+
+
+def test_a_short_answer_is_split_as_a_refused_read(short_board: ShortBoard) -> None:
+    # issue 33 §12: "asked for 71 registers, got 60" ended the scan with exit 1. The board has
+    # registers 200..259 here, nothing after them (its counter and frame are at 10..67)
+    short_board.device.set_input(200, range(100, 160))
+    result = invoke("--input", "200-270", "--rounds", "2", "--interval", "0")
+    assert result.exit_code == 0, result.output
+    readable = set(range(200, 260))
+    first_pass = expected_reads(readable, 200, 71)
+    reads = [(a, n) for _, _, a, n in short_board.requests]
+    assert reads[: len(first_pass)] == first_pass
+    assert reads[len(first_pass) : -1] == [(200, 60)] * 2  # the rounds read what answered
+    lines = result.output.splitlines()
+    row250 = next(line for line in lines if line.startswith("    250 "))
+    assert row250.split()[1:] == [str(100 + a - 200) for a in range(250, 260)]
+    assert "    260-270: unreadable" in lines
+    assert "  input 200-259: 0x0064 0x0065" in result.output  # the report goes on: constants
+
+
+def test_a_device_that_answers_at_most_60_registers_is_read_whole(short_board: ShortBoard) -> None:
+    short_board.cap = 60
+    short_board.device.set_input(200, range(1000, 1125))
+    result = invoke("--input", "200-324", "--rounds", "1", "--interval", "0", "--json")
+    assert result.exit_code == 0, result.output
+    # 125 -> 62 + 63 (both short) -> 31 + 31 and 31 + 32: every register read
+    reads = [(a, n) for _, _, a, n in short_board.requests[:-1]]
+    per_pass = [(200, 125), (200, 62), (200, 31), (231, 31), (262, 63), (262, 31), (293, 32)]
+    assert reads == per_pass * 2
+    assert "asked for" not in result.output
