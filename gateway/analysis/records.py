@@ -426,7 +426,8 @@ class RecordWriter:
     value) as an empty field, a label as written. A metadata value is written on one line,
     its runs of white space (line breaks too) as one space. ``row`` writes one row; ``flush``
     passes the rows to the file, so a recording that is interrupted is a valid record of what
-    was written before.
+    was written before. A channel name that would not read back as itself
+    (``channel_name_problem``) is a ``ValueError``: no field is quoted.
     """
 
     def __init__(
@@ -442,6 +443,7 @@ class RecordWriter:
         self.has_force = has_force
         self.has_temperature = has_temperature
         self.extra_columns = tuple(extra_columns)
+        self._channels_ok: set[str] = set()
         for key, value in (metadata or {}).items():
             out.write(f"# {key}: {' '.join(str(value).split())}\n")
         cols = ["time_s", "channel", "resistance_ohm"]
@@ -466,6 +468,11 @@ class RecordWriter:
     ) -> None:
         """One sample of one channel; ``force_n`` / ``temperature_c`` when the record has
         them, ``extra`` one value per extra column."""
+        if channel not in self._channels_ok:
+            problem = channel_name_problem(channel)
+            if problem is not None:
+                raise ValueError(f"channel name {channel[:80]!r}: {problem}")
+            self._channels_ok.add(channel)
         fields = [_fmt(time_s), channel, _fmt(resistance_ohm)]
         if self.has_force:
             if force_n is None:
@@ -522,6 +529,23 @@ def _fmt(value: float) -> str:
     if math.isinf(v):
         return "inf" if v > 0 else "-inf"
     return repr(v)
+
+
+def channel_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot stand as a channel in a record and read back as itself, or None.
+    The writer does not quote: a comma, a quote or a line break would split or end the row
+    (and could forge rows), white space at either end is stripped by the reader, and a
+    character that is not printable (a control, a format or a separator character, a lone
+    surrogate) is not text a record holds."""
+    if not name:
+        return "empty"
+    if "," in name or '"' in name:
+        return "a comma or a quote in it"
+    if not name.isprintable():
+        return "a line break, control or other non-printable character in it"
+    if name != name.strip():
+        return "white space at its start or end"
+    return None
 
 
 def _plain_label(text: str) -> bool:

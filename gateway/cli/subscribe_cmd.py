@@ -27,11 +27,12 @@ from types import FrameType
 import click
 
 from ..analysis.recorder import record_path_ok
-from ..analysis.records import RecordWriter
+from ..analysis.records import RecordWriter, channel_name_problem
 from ..atomic import AtomicFile
 from ..errors import ConfigError
 from ..mqtt.subscribe_settings import SESSION_EXPIRY_S
 from ..mqtt.subscriber import (
+    PENDING_BYTES_LIMIT,
     Frame,
     FrameStream,
     SubscribeError,
@@ -75,6 +76,8 @@ class _Recorder:
         self.rows = 0
         self.skipped_rows = 0
         self.backwards = 0
+        self.unwritable = 0  # frames refused: a channel label a record cannot hold
+        self.notices: list[str] = []
 
     def label(self, frame: Frame, channel: str) -> str:
         parts = [frame.gateway] if self.label_gateway else []
@@ -86,6 +89,18 @@ class _Recorder:
         self.skipped_rows += skipped
         if not rows:
             return
+        labels = [self.label(frame, channel) for channel, _ in rows]
+        problem = _labels_problem(labels)
+        if problem is not None:
+            # the whole frame, not some of its channels: the record holds whole frames only
+            self.unwritable += 1
+            self.skipped_rows += len(rows)
+            if self.unwritable == 1:
+                self.notices.append(
+                    f"{(frame.gateway + '/' + frame.device)[:80]!r}: frame {frame.sequence} not recorded: "
+                    f"{problem} (further such frames are counted)"
+                )
+            return
         clock = frame_clock_s(frame.fields)
         t0 = self.t0.setdefault(frame.key, clock)
         t = round(clock - t0, 6)  # microseconds: the device clock counts milliseconds
@@ -94,8 +109,8 @@ class _Recorder:
             self.skipped_rows += len(rows)
             return
         self.last[frame.key] = t
-        for channel, r in rows:
-            self.writer.row(t, self.label(frame, channel), r)
+        for label, (_, r) in zip(labels, rows, strict=True):
+            self.writer.row(t, label, r)
         self.rows += len(rows)
         self.writer.flush()
 
@@ -105,6 +120,17 @@ class _Recorder:
             self.file.commit()
         else:
             self.file.discard()
+
+
+def _labels_problem(labels: list[str]) -> str | None:
+    """Why a frame's channel labels cannot be record rows that read back as received, or None."""
+    for label in labels:
+        problem = channel_name_problem(label)
+        if problem is not None:
+            return f"the channel {label[:80]!r} ({problem})"
+    if len(set(labels)) != len(labels):
+        return "two channels of one name"
+    return None
 
 
 def _fail(message: str) -> None:
@@ -202,7 +228,7 @@ def subscribe(
     except (ConfigError, ValueError) as exc:
         _fail(str(exc))
         return
-    stream = FrameStream(prefix)
+    stream = FrameStream(prefix, pending_bytes_limit=PENDING_BYTES_LIMIT)
     recorder = None
     if out_path is not None:
         meta = {
@@ -240,6 +266,9 @@ def subscribe(
             click.echo(_line(frame))
         if recorder is not None:
             recorder.add(frame)
+            for note in recorder.notices:
+                click.echo(note, err=True)
+            recorder.notices.clear()
 
     delivered = 0
 
@@ -299,6 +328,7 @@ def subscribe(
             (seq.duplicates, "duplicate(s) dropped"),
             (seq.restarts, "restart(s)"),
             (stream.stats.undecodable, "undecodable message(s)"),
+            (stream.stats.pending_dropped, "frame(s) dropped while waiting for a meta message"),
         )
         if n
     ]
@@ -306,6 +336,11 @@ def subscribe(
         extras.append(f"{recorder.rows} rows to {out_path}")
         if recorder.skipped_rows:
             extras.append(f"{recorder.skipped_rows} channel samples without a resistance")
+        if recorder.unwritable:
+            extras.append(
+                f"{recorder.unwritable} frame(s) not recorded (a channel name a record cannot hold: "
+                "a comma, quote, line break, control character, white space at an end, or twice in a frame)"
+            )
         if recorder.backwards:
             extras.append(f"{recorder.backwards} frame(s) not recorded (time went backwards)")
     if error is None or delivered:

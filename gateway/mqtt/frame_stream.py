@@ -8,6 +8,8 @@ in the per-device sequence numbers.
 from __future__ import annotations
 
 import json
+import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Final
 
@@ -16,6 +18,13 @@ from .payload import BINARY_MAGIC, FrameDecodeError, decode_binary
 #: Frames of a device kept while its retained meta message has not arrived (binary frames
 #: need its channel names); beyond that the oldest are decoded with index names.
 PENDING_LIMIT: Final = 2000
+#: Bytes held for meta messages over all devices: a flood of binary frames under ever new
+#: device names cannot fill the memory. Beyond it a device's oldest held frames are dropped
+#: (counted in ``StreamStats.pending_dropped``; they show as a gap in its sequence).
+PENDING_BYTES_LIMIT: Final = 64 * 1024 * 1024
+#: What a held frame costs beyond its payload (the bytes object and its queue slot), so that
+#: tiny frames are bounded too.
+PENDING_FRAME_OVERHEAD_BYTES: Final = 100
 
 
 @dataclass(frozen=True)
@@ -64,6 +73,7 @@ def _check_json_fields(fields: dict[str, Any]) -> None:
             raise FrameDecodeError(f"a JSON frame whose {key} is not a number")
     if fields["host_time_s"] is None:
         raise FrameDecodeError("a JSON frame whose host_time_s is not a number")
+    _check_times(fields)
     if not isinstance(fields.get("up", True), bool):
         raise FrameDecodeError("a JSON frame whose up is not true or false")
     lists = ("channels", "force_n", "resistance_ohm", "status")
@@ -79,6 +89,16 @@ def _check_json_fields(fields: dict[str, Any]) -> None:
     for key in ("force_n", "resistance_ohm"):
         if not all(v is None or _is_number(v) for v in fields[key]):
             raise FrameDecodeError(f"a JSON frame whose {key} holds values that are not numbers or null")
+
+
+def _check_times(fields: dict[str, Any]) -> None:
+    """A frame's clock must be a finite time: NaN or an infinity (``NaN``, ``Infinity`` in
+    JSON, as Python writes them; NaN in a binary frame's host_time_s) would be a record's
+    time and every later row's origin."""
+    for key in ("host_time_s", "device_time_s"):
+        value = fields.get(key)
+        if value is not None and not math.isfinite(value):
+            raise FrameDecodeError(f"a frame whose {key} is {value}, not a finite time")
 
 
 def decode_json_frame(data: bytes, device: str) -> dict[str, Any]:
@@ -140,16 +160,21 @@ class StreamStats:
     meta: int = 0
     devices: set[tuple[str, str]] = field(default_factory=set)
     last_error: str | None = None
+    pending_dropped: int = 0  # binary frames dropped while held for a meta message
 
 
 class FrameStream:
     """Messages in, frames out, in the order of each device's sequence numbers."""
 
-    def __init__(self, prefix: str, pending_limit: int = PENDING_LIMIT) -> None:
+    def __init__(
+        self, prefix: str, pending_limit: int = PENDING_LIMIT, pending_bytes_limit: int = PENDING_BYTES_LIMIT
+    ) -> None:
         self.prefix_levels = prefix.split("/")
         self.pending_limit = pending_limit
+        self.pending_bytes_limit = pending_bytes_limit
+        self.pending_bytes = 0  # payloads held plus PENDING_FRAME_OVERHEAD_BYTES each
         self.meta: dict[tuple[str, str], dict[str, Any]] = {}
-        self.pending: dict[tuple[str, str], list[bytes]] = {}
+        self.pending: dict[tuple[str, str], deque[bytes]] = {}
         self.sequences = SequenceTracker()
         self.stats = StreamStats()
 
@@ -174,12 +199,33 @@ class FrameStream:
             return self._meta(key, payload)
         meta = self.meta.get(key)
         if meta is None and payload[:4] == BINARY_MAGIC:
-            held = self.pending.setdefault(key, [])
-            held.append(payload)
-            if len(held) <= self.pending_limit:
-                return [], []
-            return self._decode(key, [held.pop(0)], None)
+            return self._hold(key, payload)
         return self._decode(key, [payload], meta)
+
+    def _hold(self, key: tuple[str, str], payload: bytes) -> tuple[list[Frame], list[str]]:
+        """Hold a binary frame for its meta message; beyond the byte bound over all devices
+        drop this device's oldest held frames (the flooding device pays), counted."""
+        held = self.pending.setdefault(key, deque())
+        held.append(payload)
+        self.pending_bytes += len(payload) + PENDING_FRAME_OVERHEAD_BYTES
+        notices: list[str] = []
+        while self.pending_bytes > self.pending_bytes_limit and held:
+            dropped = held.popleft()
+            self.pending_bytes -= len(dropped) + PENDING_FRAME_OVERHEAD_BYTES
+            self.stats.pending_dropped += 1
+            if self.stats.pending_dropped == 1:
+                notices.append(
+                    f"{key[0]}/{key[1]}: frames held for meta messages reached "
+                    f"{self.pending_bytes_limit} bytes: the oldest are dropped (counted)"
+                )
+        if not held:
+            del self.pending[key]
+        if len(held) <= self.pending_limit:
+            return [], notices
+        oldest = held.popleft()
+        self.pending_bytes -= len(oldest) + PENDING_FRAME_OVERHEAD_BYTES
+        frames, more = self._decode(key, [oldest], None)
+        return frames, notices + more
 
     def flush(self) -> tuple[list[Frame], list[str]]:
         """Frames still held for a meta message that never came (index names as channels)."""
@@ -191,10 +237,11 @@ class FrameStream:
                     f"{key[0]}/{key[1]}: no meta message arrived; {len(held)} binary frame(s) decoded "
                     "with channel numbers as names"
                 )
-            f, n = self._decode(key, held, None)
+            f, n = self._decode(key, list(held), None)
             frames += f
             notices += n
         self.pending.clear()
+        self.pending_bytes = 0
         return frames, notices
 
     def _meta(self, key: tuple[str, str], payload: bytes) -> tuple[list[Frame], list[str]]:
@@ -213,8 +260,9 @@ class FrameStream:
             return [], [f"{key[0]}/{key[1]}: an unreadable meta message ({exc!r})"]
         self.stats.meta += 1
         self.meta[key] = {"channels": names, "encoding": encoding}
-        held = self.pending.pop(key, [])
-        return self._decode(key, held, self.meta[key]) if held else ([], [])
+        held = self.pending.pop(key, deque())
+        self.pending_bytes -= sum(len(p) + PENDING_FRAME_OVERHEAD_BYTES for p in held)
+        return self._decode(key, list(held), self.meta[key]) if held else ([], [])
 
     def _decode(
         self, key: tuple[str, str], payloads: list[bytes], meta: dict[str, Any] | None
@@ -244,6 +292,7 @@ class FrameStream:
             return decode_json_frame(payload, key[1])
         names = None if meta is None else list(meta["channels"])
         fields = decode_binary(payload, key[1], names)
+        _check_times(fields)
         if names is not None and len(fields["force_n"]) != len(names):
             raise FrameDecodeError(
                 f"the frame has {len(fields['force_n'])} channels, its meta message names {len(names)}"

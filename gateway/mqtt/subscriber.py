@@ -41,6 +41,7 @@ from paho.mqtt.properties import Properties
 
 from ..errors import GatewayError
 from .frame_rows import frame_clock_s, in_contact, recordable
+from .frame_stream import PENDING_BYTES_LIMIT as PENDING_BYTES_LIMIT
 from .frame_stream import PENDING_LIMIT as PENDING_LIMIT
 from .frame_stream import Frame, FrameStream, SequenceTracker, StreamStats
 from .frame_stream import decode_json_frame as decode_json_frame
