@@ -18,6 +18,7 @@ from ..analysis.apply import (
 )
 from ..analysis.records import read_record
 from ..errors import ConfigError, RecordError
+from ..runtime.replay import ReplayError
 
 
 def _mapping(pairs: tuple[str, ...]) -> dict[str, str]:
@@ -98,6 +99,8 @@ def apply_cmd(
         raise click.UsageError(str(exc).replace("(RECORD_CH=CAL_CH)", "with --as RECORD_CH=CAL_CH")) from None
     except (RecordError, ConfigError) as exc:
         raise click.UsageError(str(exc)) from None
+    except ReplayError as exc:
+        raise click.UsageError(f"{record_path}: {exc}") from None
     meta = {
         "source": "tactile-gateway apply",
         "record": str(record_path),

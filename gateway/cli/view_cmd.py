@@ -40,7 +40,7 @@ from ..errors import ConfigError, RecordError
 from ..metrics.server import MetricsServer
 from ..model import PAPER_EFFECTS, Divider, SensorParams
 from ..runtime.processor import DeviceProcessor
-from ..runtime.replay import ChannelSeries, replay
+from ..runtime.replay import ChannelSeries, ReplayError, replay
 from ..runtime.snapshot import DeviceSnapshot
 from ..web.playback import Playback, PlaybackPage, playback_frames
 
@@ -157,7 +157,10 @@ def record_snapshots(record: Record, device: DeviceConfig) -> tuple[list[DeviceS
                                     c.temperature_c if has_temperature else None))  # fmt: skip
     processor = DeviceProcessor(device, bus="record", poll_interval_s=_interval_s(read))
     snapshots: list[DeviceSnapshot] = []
-    replay(processor, series, snapshots.append)
+    try:
+        replay(processor, series, snapshots.append)
+    except ReplayError as exc:
+        raise ViewError(f"{record.path}: {exc}") from None
     return snapshots, has_reference
 
 

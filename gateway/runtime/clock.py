@@ -1,11 +1,14 @@
 """The time step of a poll: the device clock while it behaves, else the host clock.
 
 Pure: ``time_step`` takes the device's clock settings, what was seen of its clock
-(``ClockHealth``) and the two clocks' readings, and returns the step and the new health.
+(``ClockHealth``) and the two clocks' readings, and returns the step and the new health. A
+device time that no counter holds (not finite, negative, 2^64 ticks or more: a record's
+``time_s`` of 1e300) is no clock reading: that sample takes the host clock's step.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Final
 
@@ -15,8 +18,10 @@ __all__ = [
     "CLOCK_JUMP_FACTOR",
     "CLOCK_MAX_BACKWARD_JUMPS",
     "CLOCK_STUCK_AFTER_S",
+    "MAX_COUNTER_TICKS",
     "NO_CLOCK_HISTORY",
     "ClockHealth",
+    "counter_ticks",
     "time_step",
 ]
 
@@ -43,8 +48,22 @@ class ClockHealth:
     fallback: str | None = None  # why the host clock took over: "stuck", "backwards"
 
 
+#: No device counter holds this many ticks (the widest is 64 bit).
+MAX_COUNTER_TICKS: Final = 2**64
+
 #: A device whose clock has not been read yet.
 NO_CLOCK_HISTORY: Final = ClockHealth()
+
+
+def counter_ticks(clock: DeviceClock, device_time_s: float) -> int | None:
+    """``device_time_s`` in ticks of ``clock``, or None for a time no counter of it holds: not
+    finite, negative, or at least ``2^64`` ticks (``2^64 x tick_s``: 584 years at 1 ns)."""
+    if not math.isfinite(device_time_s) or device_time_s < 0.0:
+        return None
+    ticks_f = device_time_s / clock.tick_s
+    if not ticks_f < MAX_COUNTER_TICKS:  # also inf, from a huge time over a tiny tick
+        return None
+    return round(ticks_f)
 
 
 def time_step(
@@ -73,7 +92,9 @@ def time_step(
     host_dt = max(0.0, host_dt)
     if device_time_s is None or clock is None or health.fallback is not None:
         return (host_dt if last_time_s is not None else 0.0), host_time_s, False, health
-    ticks = device_ticks if device_ticks is not None else round(device_time_s / clock.tick_s)
+    ticks = device_ticks if device_ticks is not None else counter_ticks(clock, device_time_s)
+    if ticks is None:  # no counter holds it (a record's time_s of 1e300): the host step, flagged
+        return (host_dt if last_time_s is not None else 0.0), host_time_s, False, health
     if health.last_ticks is None or not time_from_device or last_time_s is None:
         first = ClockHealth(ticks, host_time_s, health.stuck, health.backwards)
         return (host_dt if last_time_s is not None else 0.0), device_time_s, True, first

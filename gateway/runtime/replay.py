@@ -21,6 +21,8 @@ force and the temperature. ``replay`` groups them into device samples and runs
   had sampled alone. These NaN readings are not samples and are not returned. (``stale``
   keeps every channel's state, but it marks a device that did not answer at all; it cannot
   keep one channel's state while another's advances.)
+* **Span.** Times spanning more than ``MAX_REPLAY_SPAN_S`` (584 years: a 64-bit nanosecond
+  clock), or not finite, are a ``ReplayError``: no device clock counts them.
 * **Fault bitmaps.** Every sample reports open and short bitmaps with no channel faulty, so
   a rail is a reading, as the gateway reads it from a device with bitmaps: ``inf`` (no
   current: the contact open at rest) reads no contact, 0 N.
@@ -29,6 +31,7 @@ force and the temperature. ``replay`` groups them into device samples and runs
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -39,7 +42,15 @@ from ..modbus.image import RawSample
 from .processor import DeviceProcessor
 from .snapshot import ChannelStatus, DeviceSnapshot
 
-__all__ = ["ChannelSeries", "ReplayedChannel", "replay"]
+__all__ = ["MAX_REPLAY_SPAN_S", "ChannelSeries", "ReplayError", "ReplayedChannel", "replay"]
+
+#: The longest time a replay spans (s): what a 64-bit nanosecond clock counts, 584 years
+MAX_REPLAY_SPAN_S = 2**64 * 1e-9
+
+
+class ReplayError(ValueError):
+    """Series a replay cannot step through (the message is one line for the user)."""
+
 
 FloatArray = NDArray[np.float64]
 
@@ -78,6 +89,21 @@ def _joined(series: Sequence[ChannelSeries], field: str) -> FloatArray | None:
     return np.concatenate([np.asarray(p, dtype=np.float64) for p in parts])
 
 
+def _check_span(series: Sequence[ChannelSeries]) -> None:
+    """``ReplayError`` for times that span more than ``MAX_REPLAY_SPAN_S`` (or are not finite):
+    no device clock counts them, and their steps would not be the recorded ones."""
+    times = [np.asarray(s.time_s, dtype=np.float64) for s in series if len(s.time_s)]
+    if not times:
+        return
+    first = min(float(t[0]) for t in times)
+    last = max(float(t[-1]) for t in times)
+    if not (math.isfinite(first) and math.isfinite(last) and last - first <= MAX_REPLAY_SPAN_S):
+        raise ReplayError(
+            f"time_s runs from {first:g} to {last:g} s: a span of more than {MAX_REPLAY_SPAN_S:.3g} s "
+            "(584 years, what a 64-bit nanosecond clock counts) is not seconds since a record's start"
+        )
+
+
 def replay(
     processor: DeviceProcessor,
     series: Sequence[ChannelSeries],
@@ -93,6 +119,7 @@ def replay(
         steps = np.diff(np.asarray(s.time_s, dtype=np.float64))
         if bool(np.any(steps < 0.0)):
             raise ValueError("a series' times go backwards")
+    _check_span(series)
     n_device = processor.device.n_channels
     which = np.concatenate([np.full(len(s.time_s), j, dtype=np.intp) for j, s in enumerate(series)])
     times = np.concatenate([np.asarray(s.time_s, dtype=np.float64) for s in series])
