@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import random
 import ssl
 import threading
@@ -50,6 +51,8 @@ LOOP_TIMEOUT_S = 0.02
 STOP_FLUSH_S = 5.0
 #: QoS 1 frames sent and not yet acknowledged, at most (paho's default window)
 INFLIGHT_WINDOW = 20
+#: frames dropped are said at warning level at most this often, with the counts since
+DROP_LOG_INTERVAL_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -119,6 +122,8 @@ class MqttPublisher:
         self._meta_due = True
         self._rng = rng or random.Random()
         self._logged: set[str] = set()
+        self._drops_reported: dict[str, int] = {}
+        self._drops_reported_at = -math.inf
         self._client = self._make_client(client_factory)
         self._thread: threading.Thread | None = None
 
@@ -273,7 +278,38 @@ class MqttPublisher:
                 backoff = min(BACKOFF_MAX_S, 2.0 * backoff)
                 continue
             self._drain()
+            self._report_drops(time.monotonic())
         self._finish(socket_open)
+        self._report_drops(time.monotonic(), at_stop=True)  # what the stop itself dropped too
+
+    def _report_drops(self, now: float, at_stop: bool = False) -> None:
+        """Say the frames dropped since the last report at warning level, per device and in
+        all, at most once per ``DROP_LOG_INTERVAL_S`` (``now``: monotonic seconds) and once
+        more ``at_stop``; the first drop is said at once."""
+        if now - self._drops_reported_at < DROP_LOG_INTERVAL_S and not at_stop:
+            return
+        with self._cond:
+            dropped = dict(self._dropped)
+        new = {n: c - self._drops_reported.get(n, 0) for n, c in sorted(dropped.items())}
+        new = {n: c for n, c in new.items() if c > 0}
+        if not new:
+            return
+        since = (
+            "since the start"
+            if math.isinf(self._drops_reported_at)
+            else f"in the last {now - self._drops_reported_at:.0f} s"
+        )
+        self._drops_reported, self._drops_reported_at = dropped, now
+        log.warning(
+            "mqtt: %d frame(s) dropped %s (%s; %d in all): the broker %s acknowledged fewer frames than "
+            "were polled, or was away, and the queue (queue_frames = %d) was full",
+            sum(new.values()),
+            since,
+            ", ".join(f"{n} {c}" for n, c in new.items()),
+            sum(dropped.values()),
+            self._where(),
+            self.settings.queue_frames,
+        )
 
     def _drain(self) -> None:
         """Publish what is queued while the connection is up (the meta messages first)."""

@@ -21,7 +21,7 @@ from test_mqtt_payload import snapshot
 from gateway.config import GatewayConfig, bus_config_for, device_config_for, gateway_config_for
 from gateway.config.mqtt import MqttConfig
 from gateway.model import SensorParams
-from gateway.mqtt.publisher import INFLIGHT_WINDOW, MqttPublisher
+from gateway.mqtt.publisher import DROP_LOG_INTERVAL_S, INFLIGHT_WINDOW, MqttPublisher
 from gateway.runtime.priority import BACKGROUND_NICE
 from gateway.runtime.snapshot import GatewaySnapshot
 
@@ -169,3 +169,26 @@ def test_the_publisher_thread_yields_to_the_poll_loop_only_beside_a_fast_bus(
     publisher.stop()
     assert seen == [min(19, before + BACKGROUND_NICE) if lowered else before]
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == before
+
+
+def test_dropped_frames_are_logged_at_warning_level_with_counts_at_most_every_interval(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Issue 33 §13: drops were counted in a metric only; now also said at warning level,
+    at most once per ``DROP_LOG_INTERVAL_S``, with the counts since the last report."""
+    publisher, _client = connected_publisher(qos=1, queue_frames=10)
+    caplog.set_level("WARNING", logger="gateway.mqtt.publisher")
+    poll(publisher, 20)  # polls 1-10 dropped
+    publisher._report_drops(now=100.0)
+    assert len(caplog.records) == 1 and caplog.records[0].levelname == "WARNING"
+    assert "10 frame(s) dropped" in caplog.messages[0] and "arr 10" in caplog.messages[0]
+    publisher._drain()  # 11-20 in flight
+    poll(publisher, 15)  # 21-25 dropped
+    publisher._report_drops(now=100.0 + DROP_LOG_INTERVAL_S / 2)  # too soon: nothing said yet
+    assert len(caplog.records) == 1
+    poll(publisher, 3)  # 26-28 dropped
+    publisher._report_drops(now=100.0 + DROP_LOG_INTERVAL_S)
+    assert len(caplog.records) == 2
+    assert "8 frame(s) dropped" in caplog.messages[1] and "18 in all" in caplog.messages[1]
+    publisher._report_drops(now=100.0 + 5 * DROP_LOG_INTERVAL_S)  # no new drop: nothing said
+    assert len(caplog.records) == 2
