@@ -19,9 +19,11 @@ request head within ``header_timeout_s`` (and an idle keep-alive connection afte
 closed, and so is a TLS handshake not done by then. Connections cost no threads: the server
 has one thread for its loop, two workers (``/metrics``, the page's blocking work) and one
 for bcrypt, so a flood of wrong passwords keeps at most one core busy. At most
-``auth_queue`` bcrypt checks wait or run at once; a request that would be one more is
-answered 503 with ``Retry-After`` at once, and a scraper whose credentials were verified
-before is answered without waiting for that queue at all.
+``auth_queue`` bcrypt checks wait or run at once, in the order they came; a request that
+would be one more is answered 503 with ``Retry-After`` at once, and a scraper whose
+credentials were verified before is answered without waiting for that queue at all. The
+queue is long enough that a flood from a few connections (each has one request at a time)
+never fills it: a right password waits behind their checks, not refused.
 
 Requests to anything but ``/metrics`` (the page and its server-sent event streams, which
 last) are served at most ``page_slots`` at once (``max_connections`` less a
@@ -77,8 +79,11 @@ MAX_CONNECTIONS = 512
 HEADER_TIMEOUT_S = 10.0
 #: worker threads of the server's loop (``/metrics`` bodies, blocking work of the page)
 WORKERS = 2
-#: bcrypt checks running or waiting at once; one more is answered 503 with Retry-After
-AUTH_QUEUE = 4
+#: bcrypt checks running or waiting at once, served first come first served; one more is
+#: answered 503 with Retry-After. A connection has one request at a time, so under a flood
+#: of fewer connections a scraper waits behind at most that many checks, and behind 32 at
+#: most 32 x 0.3 s (``web_config.MAX_BCRYPT_COST``), inside a 10 s scrape timeout
+AUTH_QUEUE = 32
 #: the share of ``max_connections`` long-lived (server-sent events) responses may not take
 RESERVED_SHARE = 0.25
 #: a malformed request's cause is logged at most once per this (the rest are counted)
