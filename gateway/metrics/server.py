@@ -13,7 +13,10 @@ An ``install`` callable (``gateway.web.WebPage.install``) adds routes to the app
 e.g. the live pressure-map page; without one ``/`` is a link to ``/metrics``.
 
 Hostile or clumsy clients are bounded: at most ``max_connections`` connections are served at
-once (beyond that a connection gets a 503 and is closed; a warning is logged once when the
+once. At that limit a new connection makes room by closing the oldest connection that has no
+request in progress (one still sending its request head, or an idle keep-alive one), so slow
+heads cannot starve a scraper, whose head comes at once; only when every connection has a
+request in progress does a new one get a 503 and is closed (a warning is logged once when the
 limit is reached, and a line when it is left); a connection that has not sent a complete
 request head within ``header_timeout_s`` (and an idle keep-alive connection after as long) is
 closed, and so is a TLS handshake not done by then. Connections cost no threads: the server
@@ -44,27 +47,28 @@ import contextlib
 import logging
 import socket
 import threading
-import time
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from aiohttp import web
-from aiohttp.http_exceptions import (
-    BadHttpMethod,
-    BadStatusLine,
-    HttpProcessingError,
-    InvalidHeader,
-    InvalidURLError,
-    LineTooLong,
-)
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
-from prometheus_client.core import CounterMetricFamily, Metric
 
 from ..runtime.priority import yield_to_poll_loop
+from .http_log import BAD_REQUEST_LOG_INTERVAL_S, REFUSED_REASONS, HttpCounters, RequestLog, bad_request_cause
 from .web_config import BasicAuth, WebConfig
 
 log = logging.getLogger(__name__)
+
+__all__ = [
+    "BAD_REQUEST_LOG_INTERVAL_S",
+    "REFUSED_REASONS",
+    "HttpCounters",
+    "MetricsServer",
+    "RequestLog",
+    "bad_request_cause",
+    "busy",
+]
 
 Install = Callable[[web.Application], None]
 Handler = Callable[[web.Request], Awaitable[web.StreamResponse]]
@@ -86,10 +90,6 @@ WORKERS = 2
 AUTH_QUEUE = 32
 #: the share of ``max_connections`` long-lived (server-sent events) responses may not take
 RESERVED_SHARE = 0.25
-#: a malformed request's cause is logged at most once per this (the rest are counted)
-BAD_REQUEST_LOG_INTERVAL_S = 60.0
-#: the reasons of ``tactile_http_refused_total``
-REFUSED_REASONS = ("connections", "streams", "auth_queue")
 #: how long a refused connection is drained before it is closed
 _REFUSED_LINGER_S = 1.0
 _BUSY = (
@@ -110,144 +110,22 @@ def busy(body: bytes) -> web.Response:
     return resp
 
 
-def bad_request_cause(exc: BaseException) -> str:
-    """A short, bounded label for why aiohttp refused a request."""
-    message = getattr(exc, "message", "") or ""
-    if isinstance(exc, BadHttpMethod):
-        return "tls_on_plain_http" if "HTTPS" in message else "bad_method"
-    if isinstance(exc, LineTooLong):
-        return "line_too_long"
-    if isinstance(exc, InvalidURLError):
-        return "bad_url"
-    if isinstance(exc, BadStatusLine):
-        return "bad_request_line"
-    if isinstance(exc, InvalidHeader):
-        return "bad_header"
-    if "Too many headers" in message:
-        return "too_many_headers"
-    if "Transfer-Encoding" in message and "Content-Length" in message:
-        return "content_length_and_transfer_encoding"
-    return "bad_request"
-
-
-class HttpCounters:
-    """The server's counters and their collector: malformed requests by cause, refusals by
-    reason. Counted on the server's loop, read by a scrape from a worker thread."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self.bad_requests: dict[str, int] = {}
-        self.refused: dict[str, int] = dict.fromkeys(REFUSED_REASONS, 0)
-
-    def bad_request(self, cause: str) -> None:
-        with self._lock:
-            self.bad_requests[cause] = self.bad_requests.get(cause, 0) + 1
-
-    def refuse(self, reason: str) -> None:
-        with self._lock:
-            self.refused[reason] += 1
-
-    def collect(self) -> Iterator[Metric]:
-        with self._lock:
-            bad, refused = dict(self.bad_requests), dict(self.refused)
-        family = CounterMetricFamily(
-            "tactile_http_bad_requests",
-            "Malformed requests the HTTP server answered 400 (or closed), by cause",
-            labels=["cause"],
-        )
-        for cause in sorted(bad):
-            family.add_metric([cause], bad[cause])
-        yield family
-        family = CounterMetricFamily(
-            "tactile_http_refused",
-            "Requests or connections the HTTP server refused with a 503, by reason (connections: "
-            "the connection limit; streams: the share of the page and its event streams; "
-            "auth_queue: the bcrypt queue)",
-            labels=["reason"],
-        )
-        for reason in REFUSED_REASONS:
-            family.add_metric([reason], refused[reason])
-        yield family
-
-
-class _RequestLog:
-    """The logger aiohttp's request handlers get: a malformed request (a client's fault) is
-    counted and logged as one line per cause at most every ``interval_s`` (with the count of
-    those not logged since), never with a traceback; anything else goes to aiohttp's logger."""
-
-    def __init__(
-        self,
-        counters: HttpCounters,
-        interval_s: float = BAD_REQUEST_LOG_INTERVAL_S,
-        clock: Callable[[], float] = time.monotonic,
-    ) -> None:
-        self._counters = counters
-        self._interval_s = interval_s
-        self._clock = clock
-        self._last: dict[str, float] = {}
-        self._unlogged: dict[str, int] = {}
-        self._inner = logging.getLogger("aiohttp.server")
-
-    def _client_error(self, kw: dict[str, Any]) -> HttpProcessingError | None:
-        exc = kw.get("exc_info")
-        return exc if isinstance(exc, HttpProcessingError) else None
-
-    def _count(self, exc: HttpProcessingError, args: tuple[Any, ...]) -> None:
-        cause = bad_request_cause(exc)
-        self._counters.bad_request(cause)
-        now = self._clock()
-        last = self._last.get(cause)
-        if last is not None and now - last < self._interval_s:
-            self._unlogged[cause] = self._unlogged.get(cause, 0) + 1
-            return
-        self._last[cause] = now
-        unlogged = self._unlogged.pop(cause, 0)
-        remote = args[1] if len(args) > 1 else "?"
-        detail = " ".join(str(exc.message).split())[:120]
-        log.warning(
-            "HTTP server: malformed request (%s) from %s answered %d: %s%s; this cause is logged "
-            "at most every %g s (tactile_http_bad_requests_total counts each)",
-            cause,
-            remote,
-            exc.code,
-            detail,
-            f" ({unlogged} more since the last line)" if unlogged else "",
-            self._interval_s,
-        )
-
-    def exception(self, *args: Any, **kw: Any) -> None:
-        exc = self._client_error(kw)
-        if exc is not None:
-            self._count(exc, args)
-        else:
-            self._inner.exception(*args, **kw)
-
-    def debug(self, *args: Any, **kw: Any) -> None:
-        exc = self._client_error(kw)
-        if exc is not None:
-            self._count(exc, args)
-        else:
-            self._inner.debug(*args, **kw)
-
-    def __getattr__(self, name: str) -> Any:  # warning, info, isEnabledFor, ...
-        return getattr(self._inner, name)
-
-
 class _Limited(asyncio.Protocol):
     """One connection: handed to aiohttp's protocol if the server admits it; else a 503, the
     write side shut and what the client sends discarded (closing with unread data would reset
     the connection before the client reads the 503) for at most ``_REFUSED_LINGER_S``."""
 
-    __slots__ = ("_factory", "_inner", "_linger", "_owner")
+    __slots__ = ("_factory", "_inner", "_linger", "_owner", "_transport")
 
     def __init__(self, owner: MetricsServer, factory: Callable[[], asyncio.Protocol]) -> None:
         self._owner = owner
         self._factory = factory
         self._inner: asyncio.Protocol | None = None
         self._linger: asyncio.TimerHandle | None = None
+        self._transport: asyncio.BaseTransport | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        if not self._owner._admit():
+        if not self._owner._admit(transport):
             assert isinstance(transport, asyncio.WriteTransport)
             self._owner.counters.refuse("connections")
             try:
@@ -260,6 +138,7 @@ class _Limited(asyncio.Protocol):
             except Exception:  # the client is gone already
                 transport.abort()
             return
+        self._transport = transport
         self._inner = self._factory()
         self._inner.connection_made(transport)
 
@@ -269,7 +148,7 @@ class _Limited(asyncio.Protocol):
             self._linger = None
         inner, self._inner = self._inner, None
         if inner is not None:
-            self._owner._release()
+            self._owner._release(self._transport)
             inner.connection_lost(exc)
 
     def data_received(self, data: bytes) -> None:
@@ -315,12 +194,15 @@ class MetricsServer:
         #: those checks, each with the request task that awaits it (the server's loop only)
         self._auth_checks: dict[asyncio.Future[bool], asyncio.Task[Any] | None] = {}
         self.counters = HttpCounters()
-        self._request_log = _RequestLog(self.counters)
+        self._request_log = RequestLog(self.counters)
         #: requests to anything but /metrics (the page, its event streams) served at once; the
         #: rest of the connections are kept for /metrics
         self.page_slots = max(1, max_connections - max(1, int(max_connections * RESERVED_SHARE)))
         self._page_busy = 0  # such requests being served (the server's loop only)
         self._open = 0  # admitted connections (touched on the server's loop only)
+        #: admitted connections with no request in progress (mid-head, or idle keep-alive),
+        #: oldest first: the first closed at the limit (the server's loop only)
+        self._idle: dict[asyncio.BaseTransport, None] = {}
         self._refused = 0
         self._at_limit = False
         self.web_config = web_config or WebConfig()
@@ -387,6 +269,18 @@ class MetricsServer:
 
     @web.middleware
     async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
+        """A request in progress: its connection is not closed to make room at the limit."""
+        transport = request.transport
+        if transport is None:
+            return await self._guarded(request, handler)
+        self._idle.pop(transport, None)
+        try:
+            return await self._guarded(request, handler)
+        finally:
+            if not transport.is_closing():
+                self._idle[transport] = None  # idle keep-alive again, the newest
+
+    async def _guarded(self, request: web.Request, handler: Handler) -> web.StreamResponse:
         """Basic auth on every path; our plain 404 and 405 for paths we do not serve."""
         if self._auth is not None:
             header = request.headers.get("Authorization")
@@ -453,8 +347,18 @@ class MetricsServer:
         return web.Response(body=_INDEX, headers={"Content-Type": "text/html; charset=utf-8"})
 
     # ------------------------------------------------------------------ connections
-    def _admit(self) -> bool:
-        if self._open >= self.max_connections:
+    def _admit(self, transport: asyncio.BaseTransport) -> bool:
+        if self._open >= self.max_connections and self._idle:
+            # slow or idle clients must not hold every slot: the oldest without a request in
+            # progress makes room (a scraper's request head comes at once, then it is busy)
+            oldest = next(iter(self._idle))
+            del self._idle[oldest]
+            self.counters.refuse("idle_closed")
+            if isinstance(oldest, asyncio.WriteTransport):
+                oldest.abort()  # its connection_lost releases the slot
+            else:
+                oldest.close()
+        elif self._open >= self.max_connections:
             self._refused += 1
             if not self._at_limit:
                 self._at_limit = True
@@ -466,10 +370,13 @@ class MetricsServer:
                 )
             return False
         self._open += 1
+        self._idle[transport] = None
         return True
 
-    def _release(self) -> None:
+    def _release(self, transport: asyncio.BaseTransport | None) -> None:
         self._open -= 1
+        if transport is not None:
+            self._idle.pop(transport, None)
         if self._at_limit and self._open <= self.max_connections // 2:
             self._at_limit = False
             log.info(

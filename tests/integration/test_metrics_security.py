@@ -26,7 +26,7 @@ from gateway.cli import main
 from gateway.config import bus_config_for, gateway_config_for
 from gateway.metrics.collector import make_registry
 from gateway.metrics.server import MetricsServer
-from gateway.metrics.web_config import load_web_config
+from gateway.metrics.web_config import WebConfig, load_web_config
 from gateway.runtime.poller import Poller, SnapshotHolder
 from sim_device import ArrayConfig, SimArray, serve_tcp
 
@@ -200,24 +200,44 @@ def _closed_by_server(s: socket.socket) -> bool:
 def test_connections_beyond_the_cap_get_503_and_one_warning(
     idle_sockets: list[socket.socket], caplog: pytest.LogCaptureFixture
 ) -> None:
+    # 20 connections each with a request in progress (its bcrypt check held): none of them
+    # can be closed to make room (issue 33 §7 closes only those with no request in progress)
     registry = make_registry(SnapshotHolder().get, CollectorRegistry())
     caplog.set_level(logging.INFO, logger="gateway.metrics.server")
-    with MetricsServer(registry, "127.0.0.1", 0, max_connections=20, header_timeout_s=30) as server:
-        for _ in range(20):
-            idle_sockets.append(socket.create_connection(("127.0.0.1", server.port), timeout=5))
-        _wait_for(lambda: server.open_connections == 20, 10, "20 connections admitted")
-        refused = [_get(server.port) for _ in range(5)]
-        assert all(r.startswith(b"HTTP/1.1 503 ") for r in refused), refused
-        assert server.open_connections == 20
-        warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
-        assert len(warnings) == 1 and "limit" in warnings[0].getMessage()
+    hashed = bcrypt.hashpw(b"pw", bcrypt.gensalt(rounds=4))
+    web = WebConfig(basic_auth_users={"prometheus": hashed})
+    gate = threading.Event()
+    with MetricsServer(registry, "127.0.0.1", 0, web, max_connections=20, header_timeout_s=30) as server:
+        auth = server._auth
+        assert auth is not None
+        real_check = auth.check
+
+        def held_check(header: str | None) -> bool:
+            gate.wait(30)
+            return real_check(header)
+
+        auth.check = held_check  # type: ignore[method-assign]
+        try:
+            wrong = b"Authorization: Basic " + base64.b64encode(b"prometheus:wrong") + b"\r\n"
+            for _ in range(20):
+                s = socket.create_connection(("127.0.0.1", server.port), timeout=5)
+                s.sendall(b"GET /metrics HTTP/1.1\r\nHost: x\r\n" + wrong + b"\r\n")
+                idle_sockets.append(s)
+            _wait_for(lambda: server._auth_pending == 20, 10, "20 requests in progress")
+            refused = [_get(server.port) for _ in range(5)]
+            assert all(r.startswith(b"HTTP/1.1 503 ") for r in refused), refused
+            assert server.open_connections == 20
+            warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
+            assert len(warnings) == 1 and "limit" in warnings[0].getMessage()
+        finally:
+            gate.set()
         for s in idle_sockets:
             s.close()
         idle_sockets.clear()
         _wait_for(lambda: server.open_connections == 0, 10, "connections closed")
         messages = [r.getMessage() for r in caplog.records]
         assert any("accepting again" in m and "5 refused" in m for m in messages), messages
-        assert _get(server.port).startswith(b"HTTP/1.1 200 ")
+        assert _get(server.port, b"prometheus:pw").startswith(b"HTTP/1.1 200 ")
 
 
 def _array() -> SimArray:
