@@ -60,7 +60,7 @@ def read_text_file(path: Path, what: str) -> str:
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): TOML files are UTF-8") from None
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): a {what} is UTF-8 text") from None
 
 
 class Required:

@@ -35,6 +35,7 @@ from paho.mqtt.enums import CallbackAPIVersion, MQTTProtocolVersion
 
 from ..config import GatewayConfig
 from ..config.mqtt import MqttConfig
+from ..config.tables import read_text_file
 from ..runtime.frame import frame_of
 from ..runtime.priority import polls_fast, yield_to_poll_loop
 from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
@@ -196,7 +197,7 @@ class MqttPublisher:
         if s.username is not None:
             password = None
             if s.password_file is not None:
-                password = s.password_file.read_text(encoding="utf-8").rstrip("\r\n")
+                password = read_text_file(s.password_file, "password file").rstrip("\r\n")
             client.username_pw_set(s.username, password)
         if s.tls is not None:
             client.tls_set(

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Final
 
 from ..config.mqtt import check_topic_level
+from ..config.tables import read_text_file
 from ..errors import ConfigError
 
 
@@ -52,7 +53,7 @@ def read_password_file(path: Path) -> str:
                 f"--password-file: {path} holds a secret but is accessible to other users "
                 f"(mode {mode:04o}): run `chmod 600 {path}`"
             )
-        text = path.read_text(encoding="utf-8")
+        text = read_text_file(path, "password file")
     except FileNotFoundError:
         raise ConfigError(f"--password-file: {path} does not exist") from None
     except (OSError, UnicodeDecodeError) as exc:
