@@ -27,6 +27,13 @@ doc's device until the doc's next ``tactile-sim run`` or its end; ``tactile-gate
 ``demo`` are up when their /metrics says ``tactile_device_up ... 1``; ``tactile-gateway view``
 when the page address it prints serves ``/api/playback``.
 
+A new shell does not have the virtualenv on its PATH: a doc's commands run with the test's
+virtualenv taken off PATH until the doc activates it (``. .venv/bin/activate``, which the test
+checks exists and then does by putting the virtualenv's bin/ first on PATH), so a doc that
+prints ``tactile-gateway`` or ``tactile-sim`` before saying how to activate fails as a user's
+shell would ("command not found"). ``make demo`` needs no activation: make runs the virtualenv's
+program.
+
 What a user types is changed only by ``SUBSTITUTIONS`` and ``CONFIG_SUBSTITUTIONS`` below:
 fixed ports become ephemeral loopback ports, /tmp becomes the test's directory, a 1-minute
 record becomes 12 s.
@@ -38,6 +45,7 @@ import contextlib
 import os
 import re
 import shlex
+import shutil
 import signal
 import socket
 import subprocess
@@ -56,6 +64,8 @@ DOCS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
 BIN = Path(sys.executable).parent
 PROGRAMS = ("tactile-gateway", "tactile-sim")
 COMMAND_LANGS = ("sh", "bash", "console")
+#: The activation step a doc prints before its first ``tactile-gateway`` or ``tactile-sim``.
+ACTIVATE = re.compile(r"^(?:\.|source) \.venv/bin/activate$")
 #: How long one command or one start-up may take on a busy 2-core machine (s).
 COMMAND_TIMEOUT_S = 180.0
 UP_TIMEOUT_S = 60.0
@@ -71,9 +81,9 @@ class Ports:
 #: (pattern, replacement, why) applied to each command line, in order. The replacement may
 #: use {device}, {metrics} (free loopback ports) and {tmp} (the doc's working directory).
 SUBSTITUTIONS: list[tuple[str, str, str]] = [
-    (r"^make demo$", "tactile-gateway demo", "the Makefile target runs this after building .venv"),
+    (r"^make demo$", "{bin}/tactile-gateway demo", "the Makefile target runs this after building .venv"),
     (r"^make test$", "", "make test runs this test: not again from inside it"),
-    (r"^(tactile-gateway demo)\b", r"\1 --port {metrics}", "the demo's page and metrics port, 9830"),
+    (r"^((?:\S*/)?tactile-gateway demo)\b", r"\1 --port {metrics}", "the demo's page and metrics port, 9830"),
     (r"127\.0\.0\.1:50(20|21)\b", "127.0.0.1:{device}", "the simulator's ports"),
     (r"--port 50(20|21)\b", "--port {device}", "the simulator's ports"),
     (r"--host 192\.0\.2\.7\b", "--host 127.0.0.1 --port {device}", "a documentation address: the simulator"),
@@ -158,7 +168,12 @@ def commands(block: Block) -> list[str]:
 
 
 def substitute(line: str, table: list[tuple[str, str, str]], ports: Ports) -> str:
-    values = {"device": str(ports.device), "metrics": str(ports.metrics), "tmp": str(ports.tmp)}
+    values = {
+        "device": str(ports.device),
+        "metrics": str(ports.metrics),
+        "tmp": str(ports.tmp),
+        "bin": str(BIN),
+    }
     for pattern, replacement, _why in table:
         filled = re.sub(r"\{(\w+)\}", lambda m: values[m[1]], replacement)
         line = re.sub(pattern, filled, line, flags=re.MULTILINE)
@@ -221,6 +236,7 @@ class Session:
     ports: Ports
     env: dict[str, str]
     device: subprocess.Popen[bytes] | None = None
+    activated: bool = False
     logs: dict[int, Path] = field(default_factory=dict)
 
     @property
@@ -255,16 +271,32 @@ class Session:
             self.device.wait()
 
 
+def path_without_venv() -> str:
+    """PATH as a new shell has it: without the test's virtualenv (pytest may run inside it)."""
+    return os.pathsep.join(
+        d for d in os.environ.get("PATH", "").split(os.pathsep) if d and Path(d).resolve() != BIN.resolve()
+    )
+
+
+def activate(session: Session, where: str) -> None:
+    """``. .venv/bin/activate``: the script must exist where the doc's commands run."""
+    script = session.cwd / ".venv" / "bin" / "activate"
+    assert script.is_file(), f"{where}\n  {script} does not exist"
+    session.env["PATH"] = f"{BIN}{os.pathsep}{session.env['PATH']}"
+    session.activated = True
+
+
 @pytest.fixture
 def session(tmp_path: Path) -> Iterator[Session]:
     ports = Ports(device=free_port(), metrics=free_port(), tmp=tmp_path)
-    env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ.get('PATH', '')}", "NO_COLOR": "1"}
+    env = {**os.environ, "PATH": path_without_venv(), "NO_COLOR": "1"}
     examples = tmp_path / "examples"
     examples.mkdir()
     for src in (REPO / "examples").iterdir():
         if src.is_file():
             (examples / src.name).write_text(substitute(src.read_text(), CONFIG_SUBSTITUTIONS, ports))
     (tmp_path / "tests").symlink_to(REPO / "tests")
+    (tmp_path / ".venv").symlink_to(BIN.parent, target_is_directory=True)
     s = Session(ports, env)
     try:
         yield s
@@ -291,10 +323,20 @@ def run_command(session: Session, block: Block, printed: str) -> None:
     line = substitute(shlex.join(shlex.split(printed, comments=True)), SUBSTITUTIONS, session.ports)
     if not line:
         return
+    if ACTIVATE.match(line):
+        activate(session, f"{block.where}: {printed}")
+        return
     argv = shlex.split(line, comments=True)
     where = f"{block.where}: {printed}\n  ran: {shlex.join(argv)}"
-    assert argv[0] in PROGRAMS, f"{where}\n  {argv[0]!r} is not one of {PROGRAMS}: mark the block skip"
-    argv[0] = str(BIN / argv[0])
+    assert Path(argv[0]).name in PROGRAMS, (
+        f"{where}\n  {argv[0]!r} is not one of {PROGRAMS}: mark the block skip"
+    )
+    found = argv[0] if Path(argv[0]).is_absolute() else shutil.which(argv[0], path=session.env["PATH"])
+    assert found is not None, (
+        f"{where}\n  {argv[0]}: command not found (a new shell has no virtualenv on PATH): "
+        "say `. .venv/bin/activate` before the doc's first command"
+    )
+    argv[0] = found
     sub = argv[1] if len(argv) > 1 else ""
     if Path(argv[0]).name == "tactile-sim" and sub == "run":
         if session.device is not None:
@@ -335,8 +377,11 @@ def run_command(session: Session, block: Block, printed: str) -> None:
 
 
 def check_config(session: Session, block: Block, path: Path) -> None:
+    """The test's own check of a configuration block: not a printed command, so no activation."""
     run_command(
-        session, block, f"tactile-gateway check-config -c {shlex.quote(str(path.relative_to(session.cwd)))}"
+        session,
+        block,
+        f"{BIN / 'tactile-gateway'} check-config -c {shlex.quote(str(path.relative_to(session.cwd)))}",
     )
 
 
@@ -368,6 +413,25 @@ def problems(block: Block) -> list[str]:
     if block.lang in COMMAND_LANGS and block.marker is None and not commands(block):
         out.append(f"{block.where}: a command block without a command")
     return out
+
+
+def first_unactivated_program(blocks: list[Block]) -> str | None:
+    """Where a doc runs one of PROGRAMS before printing the activation step, or None."""
+    for block in blocks:
+        if block.marker in ("skip", "fragment") or block.lang not in COMMAND_LANGS:
+            continue
+        for line in commands(block):
+            printed = shlex.join(shlex.split(line, comments=True))
+            if ACTIVATE.match(printed):
+                return None
+            if printed.split(" ", 1)[0] in PROGRAMS:
+                return f"{block.where}: {line}"
+    return None
+
+
+def test_every_doc_says_how_to_activate_the_virtualenv_before_its_first_program() -> None:
+    late = [w for blocks in ALL_BLOCKS.values() if (w := first_unactivated_program(blocks)) is not None]
+    assert not late, "printed before `. .venv/bin/activate`:\n" + "\n".join(late)
 
 
 def tally() -> dict[str, list[str]]:
