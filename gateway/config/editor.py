@@ -257,13 +257,28 @@ def _set_param(entry: Any, key: str, value: Item) -> None:
             items.append((key, value.as_string()))
         entry["params"] = _inline(items)
         return
-    entry["params"] = _inline([(key, value.as_string())])
+    _set_key(entry, "params", _inline([(key, value.as_string())]))
+
+
+def _set_key(entry: Any, key: str, item: Item) -> None:
+    """Set ``key``; a new key of a table goes after its last key, above the comments that end
+    the table (often a commented-out example, which the new line would otherwise read as part
+    of)."""
+    body = entry.value.body if isinstance(entry, Table) else None
+    if key in entry or not body:
+        entry[key] = item
+        return
+    last = max((i for i, (k, _) in enumerate(body) if k is not None), default=None)
+    if last is None or last == len(body) - 1:
+        entry[key] = item
+        return
+    entry.value._insert_after(body[last][0], key, item)
 
 
 def _apply(entry: Any, assignments: Sequence[Assignment]) -> None:
     for assignment in assignments:
         if assignment.key in PLAIN_KEYS or assignment.key == OVERRIDE_KEY:
-            entry[assignment.key] = assignment.item
+            _set_key(entry, assignment.key, assignment.item)
         else:
             _set_param(entry, assignment.key, assignment.item)
 

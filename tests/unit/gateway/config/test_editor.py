@@ -168,3 +168,21 @@ def test_a_read_only_configuration_is_not_replaced(config_file: Path) -> None:
         edit_channel(config_file, "tip", None, [parse_assignment("x_mm=3")])
     assert config_file.read_bytes() == before
     assert oct(config_file.stat().st_mode & 0o777) == "0o444"
+
+
+def test_a_new_key_goes_above_a_commented_example_at_the_end_of_its_table(tmp_path: Path) -> None:
+    text = CONFIG.replace(
+        "params = { r0_ohm = 190e3 }  # calibration run 3\n",
+        "# params = { r0_ohm = 190000.0 }   # an example, commented out\n\n"
+        "[[bus.device.channel]]\nindex = 1\n",
+    )
+    path = tmp_path / "gateway.toml"
+    path.write_text(text, encoding="utf-8")
+    edit_channel(path, "tip", None, [flag_assignment(False)])
+    new_text = path.read_text(encoding="utf-8")
+    lines = new_text.splitlines()
+    flag = lines.index("enabled = false")
+    example = next(i for i, line in enumerate(lines) if line.startswith("# params"))
+    assert lines[flag - 1] == 'name = "tip"   # fingertip'
+    assert flag < example, new_text
+    assert lines[example + 1 : example + 3] == ["", "[[bus.device.channel]]"]
