@@ -207,7 +207,7 @@ def run(config_path: Path, no_page: bool, log_level: str) -> None:
 def snapshot_json(snap: GatewaySnapshot) -> dict[str, Any]:
     """A JSON-ready view of a snapshot: each device's published ``Frame`` (``runtime.frame``:
     its rounding and its None for an absent value, never NaN), with the bus and each
-    channel's index and position."""
+    channel's index, position and reference force in N (a bench's load cell; None without one)."""
     devices = []
     for name in sorted(snap.devices):
         dev = snap.devices[name]
@@ -234,6 +234,7 @@ def snapshot_json(snap: GatewaySnapshot) -> dict[str, Any]:
                         "resistance_ohm": resistance_ohm,
                         "force_n": force_n,
                         "force_static_n": force_static_n,
+                        "reference_force_n": c.reference_force_n,
                     }
                     for c, status, resistance_ohm, force_n, force_static_n in zip(
                         dev.channels(),

@@ -79,3 +79,20 @@ def test_the_json_rounds_as_the_frame_does(monkeypatch: pytest.MonkeyPatch) -> N
     monkeypatch.setattr(frame, "DECIMALS", 2)
     (dev,) = snapshot_json(_snapshot())["devices"]
     assert dev["channels"][0]["resistance_ohm"] == 142857.14
+
+
+def test_the_json_carries_each_channels_reference_force() -> None:
+    channels = tuple(
+        ChannelConfig(k, f"ch{k:02d}", 2.5 * k, 0.0, True, PAPER_EFFECTS, SensorParams(), None, LINE)
+        for k in range(2)
+    )
+    dev = DeviceConfig(
+        "arr", 1, "float32", 2, RegisterMap(), Divider(), channels, False, GridLayout(2, 2, 2.5, 2.5), None
+    )
+    proc = DeviceProcessor(dev, "bench", 0.1)
+    raw = RawSample(
+        resistance_ohm=1.0 / (M * np.array([2.0, 0.0]) + N), reference_force_n=np.array([1.75, np.nan])
+    )
+    snap, _ = proc.process(proc.initial_state(), raw, 1e9, 0.0)
+    (out,) = snapshot_json(GatewaySnapshot.build({"arr": snap}, {}, 1))["devices"]
+    assert [c["reference_force_n"] for c in out["channels"]] == [1.75, None]
