@@ -37,7 +37,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..config.calibration_file import calibrated_device, calibration_channels, calibration_effects
+from ..config.calibration_file import (
+    calibrated_device,
+    calibration_channels,
+    calibration_effects,
+    load_calibration,
+)
 from ..config.schema import ChannelConfig
 from ..errors import GatewayError
 from ..runtime.processor import DeviceProcessor
@@ -105,6 +110,9 @@ class Applied:
     effects: tuple[str, ...]  # the physical model's effects (the calibration's, as the gateway's)
     fitted_effects: tuple[str, ...] | None  # the calibration's [meta] effects, if it says
     device_samples: int
+    #: the record is the one the calibration was fitted on (its [meta] record): its errors are
+    #: fit errors, not a test on new data
+    in_sample: bool = False
 
     @property
     def n_rows(self) -> int:
@@ -213,7 +221,31 @@ def apply_calibration(
         )
     )
     effects = tuple(processor.channels[0].effects) if processor.channels else ()
-    return Applied(record, calibration, applied, effects, calibration_effects(calibration), n_samples)
+    return Applied(
+        record,
+        calibration,
+        applied,
+        effects,
+        calibration_effects(calibration),
+        n_samples,
+        _same_file(load_calibration(calibration).record, calibration, record.path),
+    )
+
+
+def _same_file(fitted_on: str | None, calibration: Path, record_path: Path | None) -> bool:
+    """Whether ``fitted_on`` (a calibration's [meta] record, as typed to ``calibrate``: absolute,
+    or relative to where it ran, often the calibration's folder) is the file at ``record_path``."""
+    if fitted_on is None or record_path is None or not record_path.is_file():
+        return False
+    named = Path(fitted_on)
+    candidates = [named] if named.is_absolute() else [named, calibration.parent / named]
+    for candidate in candidates:
+        try:
+            if candidate.is_file() and candidate.samefile(record_path):
+                return True
+        except OSError:
+            continue
+    return False
 
 
 # ------------------------------------------------------------------------------ the record
@@ -392,6 +424,7 @@ def apply_report(applied: Applied, errors: Sequence[ChannelErrors | None]) -> di
         "rows": applied.n_rows,
         "device_samples": applied.device_samples,
         "reference": overall is not None,
+        "in_sample": applied.in_sample,
         "channels": [
             {
                 "channel": ch.name,
@@ -442,6 +475,11 @@ def format_apply_report(applied: Applied, errors: Sequence[ChannelErrors | None]
         f"applied {applied.calibration} to {src}: {len(applied.channels)} channel(s), {applied.n_rows} rows, "
         f"{applied.device_samples} device samples; physical model: {', '.join(applied.effects)}"
     ]
+    if applied.in_sample:
+        lines.append(
+            "note: in-sample: this is the record the calibration was fitted on ([meta] record), so "
+            "the errors below are fit errors, not a test; apply it to another record for held-out ones"
+        )
     fitted = applied.fitted_effects
     by_model = any(c.model == "physics" for c in applied.channels)
     if by_model and fitted is not None and set(fitted) != set(applied.effects):

@@ -242,3 +242,20 @@ def test_a_calibration_the_gateway_refuses_is_refused_with_its_message(tmp_path:
         apply_calibration(wrong_line, record)
     with pytest.raises(ConfigError, match="no such file"):
         apply_calibration(tmp_path / "none.toml", record)
+
+
+def test_the_calibrations_own_record_is_reported_as_in_sample(tmp_path: Path) -> None:
+    from gateway.analysis.apply import format_apply_report
+
+    text = "time_s,channel,resistance_ohm,force_n\n0,tip,1e5,0.8\n1,tip,2.5e4,3.8\n2,tip,5e4,1.8\n"
+    own = tmp_path / "rec.csv"
+    other = tmp_path / "other.csv"
+    own.write_text(text)
+    other.write_text(text)
+    cal = _calibration(tmp_path, f'[meta]\nrecord = "{own}"\n' + LINE)
+    for path, in_sample in ((own, True), (other, False)):
+        applied = apply_calibration(cal, read_record(path))
+        errors = [channel_errors(c) for c in applied.channels]
+        report = format_apply_report(applied, errors)
+        assert ("in-sample" in report) is in_sample, report
+        assert apply_report(applied, errors)["in_sample"] is in_sample
