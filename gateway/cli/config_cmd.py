@@ -150,7 +150,13 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
             f"{min(values):.4g}..{max(values):.4g} {unit} (read at the baseline: 0 N, no contact)"
         )
     else:
-        hint = "see `tare`" + (", or `tare --device-zero` for the device's own" if device_zero else "")
+        if not device_zero:
+            hint = "see `tare`"
+        elif dev.encoding is Encoding.ADC:
+            # a device-zeroed point reads 0 counts, which the divider takes for an open sensor
+            hint = "see `tare`; not `tare --device-zero`: a zeroed point reads 0 counts, taken for open"
+        else:
+            hint = "see `tare`, or `tare --device-zero` for the device's own"
         out.append(f"    zero: no baselines (an unloaded channel must read the model's own R(0 N); {hint})")
     out.append(f"    layout: {dev.layout.describe()}; channel indices as drawn:")
     out.extend(_grid(dev))

@@ -447,3 +447,33 @@ def test_list_and_show_mark_calibrated_parameters(config_file: Path) -> None:
     assert ch04.endswith("e0_pa (cal)")
     shown = run("channels", "show", "ch04", "--device", "array1", "-c", str(config_file))
     assert "e0_pa                      = 1.4e+07      (calibration)" in shown.stdout
+
+
+COUNTS_WITH_ZERO = """\
+[[bus]]
+name = "lab"
+kind = "tcp"
+host = "127.0.0.1"
+
+[[bus.device]]
+name = "skin"
+device_id = 1
+profile = "{profile}"
+[bus.device.actions]
+zero = [{{ what = "dynamic zero", address = 3, value = 1, verify = false }}]
+"""
+
+
+@pytest.mark.parametrize(("profile", "suggested"), [("skin60-counts", False), ("skin60-mn", True)])
+def test_device_zero_is_suggested_only_where_the_device_outputs_its_own_zeroed_value(
+    tmp_path: Path, profile: str, suggested: bool
+) -> None:
+    # a device-zeroed counts channel reads 0 counts, which the divider takes for an open sensor
+    path = tmp_path / "gateway.toml"
+    path.write_text(COUNTS_WITH_ZERO.format(profile=profile))
+    result = CliRunner().invoke(main, ["check-config", "-c", str(path)])
+    assert result.exit_code == 0, result.output
+    (zero,) = [line for line in result.output.splitlines() if line.strip().startswith("zero:")]
+    assert ("not `tare --device-zero`" in zero) is not suggested, zero
+    assert ("`tare --device-zero` runs its zero action" in zero) is suggested, zero
+    assert "or `tare --device-zero`" not in zero, zero
