@@ -46,7 +46,6 @@ __all__ = [
     "compute_tare",
     "compute_tare_series",
     "index_ranges",
-    "model_zero_ohm",
 ]
 
 MIN_POLLS: Final = 10
@@ -117,14 +116,6 @@ def index_ranges(indices: Sequence[int]) -> str:
         parts.append(str(ordered[k]) if j == k else f"{ordered[k]}-{ordered[j]}")
         k = j + 1
     return ",".join(parts)
-
-
-def model_zero_ohm(device: DeviceConfig, index: int) -> float:
-    """The model's own unloaded resistance R(0 N) of channel ``index`` (ohm, may be inf): as a
-    baseline it takes nothing off (its excess conductance ``1/R_b - 1/R(0)`` is 0)."""
-    ch = device.channels[index]
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        return float(SensorModel(ch.effects, [ch.params]).resistance(np.zeros(1))[0])
 
 
 def compute_tare(

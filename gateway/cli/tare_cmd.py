@@ -20,10 +20,10 @@ from ..analysis.tare import (
     TareResult,
     compute_tare,
     compute_tare_series,
-    model_zero_ohm,
 )
 from ..config import DeviceConfig, load_config
 from ..config.editor import find_devices, read_config_text, set_device_array
+from ..config.readout import NO_BASELINE
 from ..errors import ConfigError, DeviceError, RecordError
 from ..runtime.sampler import sample_device
 from .action_cmd import one_device, run_device_action
@@ -116,11 +116,11 @@ def record_series(
 
 def merged_baselines(
     config_path: Path, bus_index: int, device_index: int, device: DeviceConfig, result: TareResult
-) -> tuple[str, list[float], list[str]]:
+) -> tuple[str, list[float | None], list[str]]:
     """The whole array to write for a tare of ``result.channels``: (key, one value per channel,
     notes). The other channels keep what the file gives them: the device table's array as
     written, or a calibration file's ``baseline_ohm``; a channel with no baseline at all gets
-    the model's own R(0 N), which takes nothing off (see ``model_zero_ohm``)."""
+    ``"none"`` (``config.readout.NO_BASELINE``): still no baseline, its idle reading guarded."""
     if len(result.channels) == device.n_channels:
         return result.key, list(result.values), []
     raw: Any = tomllib.loads(read_config_text(config_path).removeprefix("\ufeff"))
@@ -130,13 +130,14 @@ def merged_baselines(
     tared = dict(
         zip(result.channels, result.values if key == result.key else result.resistance_ohm, strict=True)
     )
-    values: list[float] = []
+    values: list[float | None] = []
     zeroed: list[str] = []
     for ch in device.channels:
         if ch.index in tared:
             values.append(tared[ch.index])
         elif existing == key:
-            values.append(float(table[key][ch.index]))
+            kept = table[key][ch.index]
+            values.append(None if kept == NO_BASELINE else float(kept))
         elif ch.baseline_ohm is not None:
             values.append(ch.baseline_ohm)
         elif ch.conversion is not None:
@@ -145,12 +146,15 @@ def merged_baselines(
                 "unloaded resistance a baseline cannot spell; tare it too (--channels)"
             )
         else:
-            values.append(model_zero_ohm(device, ch.index))
+            values.append(None)
             zeroed.append(ch.name)
     notes = [f"the other {device.n_channels - len(tared)} channels keep their baselines"]
     if zeroed:
         shown = ", ".join(zeroed[:6]) + (f" and {len(zeroed) - 6} more" if len(zeroed) > 6 else "")
-        notes.append(f"{shown} had no baseline: written as the model's own R(0 N), which takes nothing off")
+        notes.append(
+            f'{shown} had no baseline: written as "{NO_BASELINE}", nothing taken off, an idle reading still '
+            "flagged no_zero"
+        )
     return key, values, notes
 
 

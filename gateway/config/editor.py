@@ -30,6 +30,7 @@ from ..keys import check_keys
 from ..model import UnknownEffectError, parameter_names, parse_effects
 from .overrides import DEVICE_OVERRIDE_KEY, OVERRIDE_KEY
 from .parser import parse_config
+from .readout import NO_BASELINE
 from .schema import BusConfig, ChannelConfig, DeviceConfig, GatewayConfig
 from .tables import read_text_file
 
@@ -402,11 +403,14 @@ def flag_assignment(enabled: bool) -> Assignment:
     return Assignment("enabled", tomlkit.item(enabled), enabled)
 
 
-def _number_array(values: Sequence[float], per_line: int) -> Array:
-    """A TOML array of numbers, ``per_line`` to a line (one grid row), integers as integers."""
+def _number_array(values: Sequence[float | None], per_line: int) -> Array:
+    """A TOML array of numbers, ``per_line`` to a line (one grid row), integers as integers;
+    None as ``"none"`` (a channel without a baseline)."""
     shown = []
     for v in values:
-        if math.isinf(v):
+        if v is None:
+            shown.append(f'"{NO_BASELINE}"')
+        elif math.isinf(v):
             shown.append("inf")
         elif float(v).is_integer():
             shown.append(str(int(v)))
@@ -426,7 +430,7 @@ def set_device_array(
     config_path: Path,
     device_name: str,
     key: str,
-    values: Sequence[float],
+    values: Sequence[float | None],
     replaces: Sequence[str] = (),
     comment: str | None = None,
 ) -> DeviceConfig:

@@ -63,9 +63,15 @@ def parse_layout(device: Table, table: Table, n: int) -> GridLayout:
     )
 
 
+#: A ``baseline_ohm``/``baseline_counts`` entry for a channel without a baseline.
+NO_BASELINE = "none"
+
+
 def parse_baselines(table: Table, n: int, front_end: FrontEnd | None) -> tuple[float | None, ...] | None:
     """Per-channel unloaded resistance (ohm) from ``baseline_counts`` or ``baseline_ohm`` (in
-    units of the reference resistor for a ``ratio`` front end, as its readings are)."""
+    units of the reference resistor for a ``ratio`` front end, as its readings are); the string
+    ``"none"`` for a channel without a baseline (None: nothing taken off, the unloaded reading
+    guarded as ``no_zero``), as a partial ``tare`` writes for the channels it did not zero."""
     if table.has("baseline_counts") and table.has("baseline_ohm"):
         raise table.error("baseline_ohm", "give baseline_counts or baseline_ohm, not both")
     key = "baseline_counts" if table.has("baseline_counts") else "baseline_ohm"
@@ -84,8 +90,15 @@ def parse_baselines(table: Table, n: int, front_end: FrontEnd | None) -> tuple[f
     out: list[float | None] = []
     for i, value in enumerate(values):
         where = f"{table.at(key)}[{i}]"
+        if value == NO_BASELINE:
+            out.append(None)
+            continue
         if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
-            raise table.ctx.error(where, f"expected a number, got {type_name(value)} {show_value(value)}")
+            raise table.ctx.error(
+                where,
+                f'expected a number or "{NO_BASELINE}" (no baseline), got {type_name(value)} '
+                f"{show_value(value)}",
+            )
         if key == "baseline_ohm":
             if not value > 0.0:
                 raise table.ctx.error(

@@ -164,11 +164,20 @@ def test_channels_on_a_file_without_baselines_leave_the_others_uncorrected(
     path = write(tmp_path, HEAD + TAIL)
     result = tare(path, "--seconds", "0.5", "--channels", UNLOADED)
     assert result.exit_code == 0, result.output
-    assert "note: ch14, ch15, ch20, ch21 had no baseline: written as the model's own R(0 N)" in result.output
-    # no "none" entry in the format: the model's own unloaded resistance, inf with the contact
-    # effect (an open contact at 0 N), takes nothing off (1/inf - 1/inf = 0); the tared ones in ohm
+    assert 'note: ch14, ch15, ch20, ch21 had no baseline: written as "none"' in result.output
+    # the skipped channels keep no baseline ("none", never inf: inf would be a baseline, which
+    # lifts their no_zero guard and reads an idle cell as a small force); the tared ones in ohm
     values = array_block(path.read_text(encoding="utf-8"), "baseline_ohm")
-    assert values == ["inf" if ch in BLOB else "194750" for ch in range(N)]
+    assert values == ['"none"' if ch in BLOB else "194750" for ch in range(N)]
+    channels = load_config(path).buses[0].devices[0].channels
+    assert [ch.index for ch in channels if ch.baseline_ohm is None] == sorted(BLOB)
+    assert all(ch.baseline_ohm == pytest.approx(194_750.0) for ch in channels if ch.index not in BLOB)
+    # check-config counts only the channels with a baseline, and its range is finite
+    checked = CliRunner().invoke(main, ["check-config", "-c", str(path)])
+    assert checked.exit_code == 0, checked.output
+    assert f"zero: {N - len(BLOB)} channel(s) with an unloaded baseline, 1.948e+05..1.948e+05 ohm" in (
+        checked.output
+    )
 
 
 @pytest.mark.parametrize(

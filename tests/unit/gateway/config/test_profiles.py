@@ -435,7 +435,7 @@ def test_baseline_ohm_is_taken_as_written() -> None:
         (
             f"baseline_ohm = {values(['nan'] + [1e5] * 35)}",
             "baseline_ohm[0]",
-            "expected a number, got float nan",
+            "(no baseline), got float nan",
         ),
         (f"baseline_ohm = {values([1e5] * 35 + ['true'])}", "baseline_ohm[35]", "got boolean true"),
         (f"baseline_ohm = {values([1e5] * 35 + [0.0])}", "baseline_ohm[35]", "allowed: (0, inf] ohm"),
@@ -463,7 +463,24 @@ def test_a_refused_baseline_value_is_named_by_its_key_path() -> None:
     # key paths elsewhere spell an array element as key[i] (checks.registers[0].value,
     # bus[0].device[0]); a quoted "baseline_counts[2]" would name a key of that literal name
     message = refusal(ACME + f"baseline_counts = {values([3895] * 2 + ['nan'] + [3895] * 33)}\n")
-    assert message == f"{SOURCE}: {DEV}.baseline_counts[2]: expected a number, got float nan"
+    assert (
+        message
+        == f'{SOURCE}: {DEV}.baseline_counts[2]: expected a number or "none" (no baseline), got float nan'
+    )
+
+
+def test_none_in_a_baseline_array_is_a_channel_without_a_baseline() -> None:
+    """A partial tare writes "none" for the channels it did not zero: they keep no baseline (their
+    idle reading stays guarded as no_zero), never inf (a baseline that lifts the guard)."""
+    none, off = '"none"', '"off"'
+    dev = device(ACME + f"baseline_counts = {values([3895] * 2 + [none] + [3895] * 33)}\n")
+    assert dev.channels[2].baseline_ohm is None
+    assert all(ch.baseline_ohm is not None for ch in dev.channels if ch.index != 2)
+    # only that exact word: another string is refused, naming both spellings
+    message = refusal(ACME + f"baseline_ohm = {values([1e5] * 35 + [off])}\n")
+    assert message.endswith(
+        "baseline_ohm[35]: expected a number or \"none\" (no baseline), got string 'off'"
+    ), message
 
 
 def test_both_baseline_spellings_are_refused() -> None:
