@@ -15,13 +15,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .diagnostics import residual_axes
+from .diagnostics import direction_bins
 from .fitting import FitData, FitResult
 from .plots import save_figure
 
 FloatArray = NDArray[np.float64]
 
-DIRECTIONS = ((1.0, "loading", "tab:red"), (-1.0, "unloading", "tab:blue"), (0.0, "hold/rest", "tab:gray"))
+#: The colours of the loading, holding and unloading rows (``diagnostics.direction_bins``).
+DIRECTION_COLOURS = ("tab:red", "tab:gray", "tab:blue")
 
 
 def _plt() -> Any:
@@ -37,13 +38,13 @@ def draw_panels(
     data: FitData, fit: FitResult, predicted_force: dict[str, FloatArray], axes: Any, real_time: bool
 ) -> None:
     """R(F), measured vs predicted force, residuals vs force (and residual vs time with real time)."""
-    direction = residual_axes(data)["direction"]
     ok = data.usable & np.isfinite(data.resistance_ohm)
     ax_rf, ax_ff, ax_res = axes[0], axes[1], axes[2]
-    for value, label, colour in DIRECTIONS:
-        m = ok & (direction == value)
+    # the rows of the report's loading-direction table, counted as it counts them
+    for (words, m), colour in zip(direction_bins(data, fit, real_time), DIRECTION_COLOURS, strict=True):
         n = int(np.count_nonzero(m))
         if n:
+            label = words.removeprefix("while ")
             ax_rf.loglog(
                 data.force_n[m], data.resistance_ohm[m], ".", ms=3, color=colour, label=f"{label} (n={n})"
             )

@@ -288,6 +288,25 @@ def hold_segments(time_s: FloatArray, force_n: FloatArray, real_time: bool = Tru
     return [(h.start, h.stop) for h in find_holds(time_s, force_n, min_duration_s=min_s)]
 
 
+def direction_bins(
+    data: FitData, fit: FitResult, real_time: bool = True
+) -> list[tuple[str, NDArray[np.bool_]]]:
+    """The rows of the report's loading-direction table, one mask each: while loading, while
+    holding (a hold of the reference force, or a step within the hold tolerance), while
+    unloading; of the usable rows with a finite log-R residual. The residual plot counts and
+    colours the same rows (``calibration_plots``)."""
+    rows = data.usable & np.isfinite(fit.log_residual)
+    held = np.zeros(data.force_n.size, dtype=bool)
+    for a, b in hold_segments(data.time_s, data.force_n, real_time):
+        held[a:b] = True
+    d = _direction(data.force_n, held)
+    return [
+        ("while loading", rows & (d > 0)),
+        ("while holding", rows & (d == 0)),
+        ("while unloading", rows & (d < 0)),
+    ]
+
+
 def _direction(force_n: FloatArray, held: NDArray[np.bool_]) -> FloatArray:
     """+1 loading, -1 unloading, 0 holding (a detected hold, or a central step within the
     hold tolerance)."""
@@ -376,11 +395,7 @@ def residual_structure(
         skipped.append("load history: the record has no hold of its reference force")
     # loading direction
     d = _direction(f, held)
-    axis(
-        "direction",
-        "loading direction",
-        [("while loading", d > 0), ("while holding", d == 0), ("while unloading", d < 0)],
-    )
+    axis("direction", "loading direction", direction_bins(data, fit, real_time))
     # loading rate (signed dF/dt), split at the median speed of the moving rows
     if real_time and t.size > 2 and float(np.ptp(t)) > 0:
         with np.errstate(invalid="ignore", divide="ignore"):
