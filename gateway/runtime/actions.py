@@ -1,6 +1,8 @@
 """Running a device's named action (``[bus.device.actions]``: a device zero, its undo, a mode
-switch) once, from the command line: connect, verify the device is the configured one, make
-the action's writes, each read back where the configuration allows."""
+switch) once, from the command line: connect, verify the device is the configured one, make its
+set-up writes as the gateway does at every connect (``[[bus.device.setup]]``: an action such as
+a device zero works on the device as configured, not as it was left), then the action's writes,
+each read back where the configuration allows."""
 
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from ..errors import ConfigError
 from ..modbus.backends import open_transport
 from ..modbus.register_map import DeviceWrite
 from ..modbus.transport import Transport
-from .identity import verify_device
+from .identity import prepare_device
 from .writes import run_writes
 
 __all__ = ["action_writes", "run_action"]
@@ -36,10 +38,11 @@ async def run_action(
     *,
     transport_factory: Callable[[BusConfig], Transport] = open_transport,
 ) -> tuple[DeviceWrite, ...]:
-    """Make the action's writes on the device; returns them. Raises ``ConfigError`` for an
-    unknown action and the transport's ``DeviceError`` on any failure."""
+    """Make the set-up writes, then the action's, on the device; returns them in that order.
+    Raises ``ConfigError`` for an unknown action and the transport's ``DeviceError`` on any
+    failure (nothing of the action is written after a set-up write failed)."""
     writes = action_writes(device, name)
     async with transport_factory(bus) as transport:
-        await verify_device(transport, device)
+        await prepare_device(transport, device)
         await run_writes(transport, device.device_id, writes)
-    return writes
+    return (*device.registers.setup, *writes)

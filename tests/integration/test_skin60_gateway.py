@@ -112,7 +112,10 @@ async def test_the_calibrated_mode_reads_the_devices_own_force_and_zeroes_from_t
     writes = [r for r in skin.requests if r.is_write]
     assert writes == [
         *SETUP_WRITES["skin60-mn"],  # the first poll's connect
-        Skin60Request(6, HR_DYNAMIC_ZERO, 1, (1,)),  # the command line's action, and nothing else
+        # the command line: the set-up, as at every connect (the device zeroes itself as
+        # configured), then the action, and nothing else
+        *SETUP_WRITES["skin60-mn"],
+        Skin60Request(6, HR_DYNAMIC_ZERO, 1, (1,)),
         *SETUP_WRITES["skin60-mn"],  # the second poll's connect
     ]
     # a poll reads the checks, reads the set-up back and reads the frame once by function 0x42
