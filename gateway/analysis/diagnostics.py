@@ -295,11 +295,14 @@ def direction_bins(
     holding (a hold of the reference force, or a step within the hold tolerance), while
     unloading; of the usable rows with a finite log-R residual. The residual plot counts and
     colours the same rows (``calibration_plots``)."""
-    rows = data.usable & np.isfinite(fit.log_residual)
     held = np.zeros(data.force_n.size, dtype=bool)
     for a, b in hold_segments(data.time_s, data.force_n, real_time):
         held[a:b] = True
-    d = _direction(data.force_n, held)
+    return _direction_masks(_direction(data.force_n, held), data.usable & np.isfinite(fit.log_residual))
+
+
+def _direction_masks(d: FloatArray, rows: NDArray[np.bool_]) -> list[tuple[str, NDArray[np.bool_]]]:
+    """``direction_bins`` from the direction of every row (+1, 0, -1) and the rows counted."""
     return [
         ("while loading", rows & (d > 0)),
         ("while holding", rows & (d == 0)),
@@ -395,7 +398,7 @@ def residual_structure(
         skipped.append("load history: the record has no hold of its reference force")
     # loading direction
     d = _direction(f, held)
-    axis("direction", "loading direction", direction_bins(data, fit, real_time))
+    axis("direction", "loading direction", _direction_masks(d, rows))
     # loading rate (signed dF/dt), split at the median speed of the moving rows
     if real_time and t.size > 2 and float(np.ptp(t)) > 0:
         with np.errstate(invalid="ignore", divide="ignore"):
