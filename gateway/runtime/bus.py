@@ -23,7 +23,9 @@ Failure handling:
   ``backoff_max_s``: no busy loop and no synchronized reconnect storm. b starts again from
   ``backoff_initial_s`` only once a poll succeeds, not at a mere connect: a device that takes
   the connection (and the set-up writes) and then drops it is written to ever less often,
-  down to once per ``backoff_max_s / 2`` on average;
+  down to once per ``backoff_max_s / 2`` on average. The device whose request lost the
+  connection keeps its own wait across the reconnect (``DeviceRunner.dropped``), so the other
+  devices of its bus are polled meanwhile, and their successful polls do not cut its wait;
 * buses are independent tasks, so nothing on one bus can stall another;
 * nothing a device sends can end a bus task: every unexpected error is logged, counted
   as a decode error and the loop goes on.
@@ -104,6 +106,9 @@ class DeviceRunner:
     verified: bool = False  # the device's checks passed on this connection
     tally: Tally = field(default_factory=Tally)
     failures: int = 0
+    #: connections lost during this device's own requests since its last successful poll: its
+    #: wait survives the reconnect, so it does not take the connection down again at once
+    dropped: int = 0
     next_attempt: float = 0.0
     last_error: str | None = None
     pending: Conversion | None = None  # read but not yet converted
@@ -303,6 +308,7 @@ class BusWorker:
         if runner.state.clock != before:
             self._log_clock(runner, before, runner.state.clock)
         runner.failures = 0
+        runner.dropped = 0
         runner.next_attempt = 0.0
         runner.last_error = None
         self.failed_connections = 0
@@ -427,7 +433,8 @@ class BusWorker:
             )
         self.connect_failures = 0
         for runner in self.runners:
-            runner.next_attempt = 0.0
+            if not runner.dropped:
+                runner.next_attempt = 0.0
             runner.verified = False
         return True
 
@@ -453,6 +460,8 @@ class BusWorker:
                     await self.poll_device(runner)
                 except DeviceConnectionError:
                     self.failed_connections += 1
+                    runner.dropped += 1
+                    runner.next_attempt = self._mono() + self._jitter(runner.dropped)
                     await self.transport.close()
                     return
         finally:

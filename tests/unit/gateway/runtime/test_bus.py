@@ -161,11 +161,15 @@ async def test_a_refused_merged_read_falls_back_to_separate_reads() -> None:
 
 
 async def test_a_lost_connection_is_reopened_on_the_next_cycle() -> None:
-    poller, worker, _, vt, _ = setup(device_image())
+    poller, worker, runner, vt, clock = setup(device_image())
     await worker.poll_cycle()
     vt.fail_next("disconnect")
     await worker.poll_cycle()
     assert not latest(poller).up and not vt.connected
+    # the device whose request lost the connection waits its back-off, reconnect or not
+    await worker.poll_cycle()
+    assert not latest(poller).up and vt.connects == 2
+    clock.now_s = runner.next_attempt + 0.001
     await worker.poll_cycle()
     assert latest(poller).up and vt.connects == 2
     vt.refuse_connects = 1

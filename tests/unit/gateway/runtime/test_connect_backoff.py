@@ -143,3 +143,45 @@ async def test_a_successful_poll_restarts_the_back_off() -> None:
     snap = poller.snapshot().devices["arr"]
     assert snap.up and worker.failed_connections == 0
     assert len(vt.writes) == before + 1  # one connect, one set-up write
+
+
+SECOND_DEVICE = """
+[[bus.device]]
+name = "good"
+device_id = 2
+channels = 4
+[bus.device.registers]
+adc_address = 100
+[bus.device.front_end]
+kind = "low_side"
+supply_v = 3.3
+reference_ohm = 10000.0
+adc_bits = 12
+"""
+
+
+async def test_a_healthy_neighbour_on_the_bus_does_not_restart_a_dropping_devices_back_off() -> None:
+    # the gap left by the fix above: any device's successful poll restarted the bus's back-off,
+    # so a device that drops the connection after its set-up write was written to once per
+    # reconnect (every 0.05 s on average) as long as a neighbour on its bus polled fine
+    vt = DropsAfterSetup("line", {1: device(), 2: device()}, timeout_s=0.2)
+    clock = SimClock()
+    poller = Poller(
+        parse_config(CONFIG + SECOND_DEVICE, source=Path("/cfg/gateway.toml")),
+        transport_factory=lambda _bus: vt,
+        rng=random.Random(3),
+        wall_clock=lambda: 1_700_000_000.0,
+        monotonic=clock,
+    )
+    worker = poller.workers[0]
+    await run_for(worker, clock, clock.now_s + 600.0)
+    # the dropping device waits its own back-off: caps of 0.1 * 2^(k-1) s up to 30 s, 15 s on
+    # average once capped, about 9 + 575 / 15 = 47 writes in 10 min; once per reconnect
+    # would be one every 0.05 s or so (12,000)
+    assert 0 < len(vt.writes) < 100, len(vt.writes)
+    # and its neighbour is polled between the drops (before, the dropping device came first
+    # on every connection and its neighbour was never polled at all)
+    snaps = poller.snapshot().devices
+    assert snaps["good"].up and not snaps["arr"].up
+    good = next(r for r in worker.runners if r.config.name == "good")
+    assert good.counters.polls_total > 100 * len(vt.writes), (good.counters.polls_total, len(vt.writes))
