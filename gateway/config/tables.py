@@ -18,14 +18,17 @@ from typing import Any, Final, TypeVar
 from ..errors import ConfigError
 from ..keys import check_keys, suggest
 from ..model.params import Interval
+from ..textfile import MAX_FILE_BYTES, read_text_file
 
 __all__ = [
+    "MAX_FILE_BYTES",
     "REQUIRED",
     "Context",
     "Required",
     "Table",
     "join_key",
     "parse_toml",
+    "read_text_file",
     "show_value",
     "suggest",
     "type_name",
@@ -34,33 +37,6 @@ __all__ = [
 _NAME_RE: Final = re.compile(r"[a-z0-9_-]{1,32}")
 _NAME_RULE: Final = "a name matching [a-z0-9_-]{1,32}"
 _BARE_KEY_RE: Final = re.compile(r"[A-Za-z0-9_-]+")
-
-
-#: A configuration, profile or calibration file larger than this is refused unread.
-MAX_FILE_BYTES: Final = 4 * 1024 * 1024
-
-
-def read_text_file(path: Path, what: str) -> str:
-    """The UTF-8 text of a regular file of at most ``MAX_FILE_BYTES``; ``ConfigError`` naming
-    the file and ``what`` it is otherwise (a device such as /dev/zero is never read, and a named
-    pipe is refused, never waited on: the open does not block)."""
-    try:
-        # O_NONBLOCK: opening a FIFO with no writer would wait for one (stopping the poll loop
-        # at a reload); it has no effect on a regular file
-        with os.fdopen(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as f:
-            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise ConfigError(f"{path}: not a regular file; a {what} is a file")
-            data = f.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read the {what}: {exc.strerror or exc}") from None
-    if len(data) > MAX_FILE_BYTES:
-        raise ConfigError(
-            f"{path}: larger than {MAX_FILE_BYTES // (1024 * 1024)} MiB; too large for a {what}"
-        )
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): a {what} is UTF-8 text") from None
 
 
 class Required:

@@ -44,6 +44,7 @@ import yaml
 
 from ..errors import ConfigError
 from ..keys import check_keys
+from ..textfile import read_text_file
 
 _CLIENT_AUTH = {
     "NoClientCert": ssl.CERT_NONE,
@@ -214,12 +215,7 @@ def _one_line(exc: yaml.YAMLError) -> str:
 
 def load_web_config(path: Path) -> WebConfig:
     """Parse and check a web-config YAML file (``ConfigError`` naming file and key)."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read web config: {exc}") from None
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}): a web config is YAML text") from None
+    text = read_text_file(path, "web config")
     try:
         data = yaml.safe_load(text) or {}
     except yaml.YAMLError as exc:

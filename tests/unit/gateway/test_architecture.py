@@ -1,7 +1,7 @@
 """The layers of ``gateway/`` import one way only (an import-linter contract, as a test).
 
 model -> modbus -> config -> runtime -> metrics / analysis -> cli, with ``errors`` and
-``atomic`` usable by all, and ``keys`` (the unknown-key check) by all but ``model``. Only the
+``atomic`` and ``textfile`` usable by all, and ``keys`` (the unknown-key check) by all but ``model``. Only the
 CLI may wire the library to the simulator. Every import counts, including those under
 ``TYPE_CHECKING`` and inside functions; and no modules of ``gateway/`` or ``sim_device/``
 import each other round a loop.
@@ -21,18 +21,20 @@ GATEWAY = ROOT / "gateway"
 ALLOWED: dict[str, set[str]] = {
     "errors": set(),
     "atomic": set(),
+    "textfile": {"errors"},
     "keys": set(),
     "model": set(),
     "modbus": {"errors", "keys"},
-    "config": {"errors", "atomic", "keys", "model", "modbus"},
-    "runtime": {"errors", "keys", "model", "modbus", "config"},
-    "metrics": {"errors", "keys", "runtime"},
-    "web": {"errors", "keys", "runtime"},
-    "mqtt": {"errors", "keys", "config", "runtime"},
-    "analysis": {"errors", "atomic", "keys", "model", "config", "runtime"},
+    "config": {"errors", "textfile", "atomic", "keys", "model", "modbus"},
+    "runtime": {"errors", "textfile", "keys", "model", "modbus", "config"},
+    "metrics": {"errors", "textfile", "keys", "runtime"},
+    "web": {"errors", "textfile", "keys", "runtime"},
+    "mqtt": {"errors", "textfile", "keys", "config", "runtime"},
+    "analysis": {"errors", "textfile", "atomic", "keys", "model", "config", "runtime"},
     "cli": {
         "errors",
         "atomic",
+        "textfile",
         "keys",
         "model",
         "modbus",
