@@ -21,12 +21,14 @@ limit is reached, and a line when it is left); a connection that has not sent a 
 request head within ``header_timeout_s`` (and an idle keep-alive connection after as long) is
 closed, and so is a TLS handshake not done by then. Connections cost no threads: the server
 has one thread for its loop, two workers (``/metrics``, the page's blocking work) and one
-for bcrypt, so a flood of wrong passwords keeps at most one core busy. At most
-``auth_queue`` bcrypt checks wait or run at once, in the order they came; a request that
-would be one more is answered 503 with ``Retry-After`` at once, and a scraper whose
-credentials were verified before is answered without waiting for that queue at all. The
-queue is long enough that a flood from a few connections (each has one request at a time)
-never fills it: a right password waits behind their checks, not refused.
+for bcrypt, so a flood of wrong passwords keeps at most one core busy. bcrypt checks are
+queued per client address and taken from the addresses in turn (``auth_queue.FairChecks``):
+at most ``auth_queue`` wait or run at once, and beyond that only an address with no check
+waiting is admitted (up to ``AUTH_HARD_LIMIT`` in all); a request that would be one more is
+answered 503 with ``Retry-After`` at once. So a flood from any number of connections of a
+few addresses never refuses a scraper from another address, which waits behind at most one
+check per flooding address. A scraper whose credentials were verified before is answered
+without waiting for that queue at all.
 
 Requests to anything but ``/metrics`` (the page and its server-sent event streams, which
 last) are served at most ``page_slots`` at once (``max_connections`` less a
@@ -44,6 +46,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import socket
 import threading
@@ -55,6 +58,7 @@ from aiohttp import web
 from prometheus_client import CONTENT_TYPE_LATEST, CollectorRegistry, generate_latest
 
 from ..runtime.priority import yield_to_poll_loop
+from .auth_queue import FairChecks
 from .http_log import BAD_REQUEST_LOG_INTERVAL_S, REFUSED_REASONS, HttpCounters, RequestLog, bad_request_cause
 from .web_config import BasicAuth, WebConfig
 
@@ -88,6 +92,10 @@ WORKERS = 2
 #: of fewer connections a scraper waits behind at most that many checks, and behind 32 at
 #: most 32 x 0.3 s (``web_config.MAX_BCRYPT_COST``), inside a 10 s scrape timeout
 AUTH_QUEUE = 32
+#: checks waiting or running at once, counting those of addresses admitted past a full
+#: ``AUTH_QUEUE`` (each with no other check waiting): a lock-out needs this many less
+#: ``AUTH_QUEUE`` distinct flooding addresses
+AUTH_HARD_LIMIT = 128
 #: the share of ``max_connections`` long-lived (server-sent events) responses may not take
 RESERVED_SHARE = 0.25
 #: how long a refused connection is drained before it is closed
@@ -190,9 +198,10 @@ class MetricsServer:
         self.max_connections = max_connections
         self.header_timeout_s = header_timeout_s
         self.auth_queue = auth_queue
-        self._auth_pending = 0  # bcrypt checks queued or running (the server's loop only)
-        #: those checks, each with the request task that awaits it (the server's loop only)
-        self._auth_checks: dict[asyncio.Future[bool], asyncio.Task[Any] | None] = {}
+        #: the bcrypt checks queued or running (made on the server's loop, with its thread)
+        self._auth_checks: FairChecks | None = None
+        #: the request tasks awaiting a check (the server's loop only)
+        self._auth_waiting: set[asyncio.Task[Any]] = set()
         self.counters = HttpCounters()
         self._request_log = RequestLog(self.counters)
         #: requests to anything but /metrics (the page, its event streams) served at once; the
@@ -226,6 +235,11 @@ class MetricsServer:
         self._stopping: asyncio.Event | None = None
         self._auth_pool: ThreadPoolExecutor | None = None
         self._registered = False  # self.counters in the registry (while serving)
+
+    @property
+    def auth_pending(self) -> int:
+        """bcrypt checks waiting or running now."""
+        return self._auth_checks.pending if self._auth_checks is not None else 0
 
     @property
     def open_connections(self) -> int:
@@ -287,20 +301,21 @@ class MetricsServer:
             # a verified pair is cached (cheap); bcrypt costs up to ~0.3 s: one thread of its own
             ok = self._auth.cached(header)
             if not ok:
-                if self._auth_pending >= self.auth_queue:  # refuse at once rather than queue
+                checks, address = self._auth_checks, request.remote or ""
+                assert checks is not None  # made with the loop
+                if not checks.admits(address):  # refuse at once rather than queue
                     self.counters.refuse("auth_queue")
                     return busy(b"too many logins being checked\n")
-                self._auth_pending += 1
-                check = asyncio.get_running_loop().run_in_executor(self._auth_pool, self._auth.check, header)
-                self._auth_checks[check] = asyncio.current_task()
+                auth, task = self._auth, asyncio.current_task()
+                if task is not None:
+                    self._auth_waiting.add(task)
                 try:
-                    ok = await check
+                    ok = await checks.check(address, functools.partial(auth.check, header))
                 except Exception as exc:  # never expected; a client must not be able to fill the log
                     log.debug("basic auth check failed: %r", exc)
                     ok = False
                 finally:
-                    self._auth_pending -= 1
-                    self._auth_checks.pop(check, None)
+                    self._auth_waiting.discard(task)
             if not ok:
                 return _text(401, b"Unauthorized\n", {"WWW-Authenticate": 'Basic realm="tactile-gateway"'})
         if request.method not in ("GET", "HEAD"):
@@ -426,9 +441,9 @@ class MetricsServer:
         """Cancel the bcrypt checks queued or running and wait for the requests awaiting them
         to end. A request whose client has gone is no longer one of the connections the
         runner's clean-up waits for; left pending, its task would be destroyed with the loop."""
-        waiting = [task for task in self._auth_checks.values() if task is not None]
-        for check in list(self._auth_checks):
-            check.cancel()
+        waiting = list(self._auth_waiting)
+        if self._auth_checks is not None:
+            self._auth_checks.cancel_all()
         if waiting:
             await asyncio.wait(waiting)
 
@@ -439,6 +454,8 @@ class MetricsServer:
         assert loop is not None
         loop.set_default_executor(ThreadPoolExecutor(WORKERS, thread_name_prefix="tactile-metrics-worker"))
         self._auth_pool = ThreadPoolExecutor(1, thread_name_prefix="tactile-metrics-auth")
+        hard_limit = max(self.auth_queue, AUTH_HARD_LIMIT)
+        self._auth_checks = FairChecks(self._auth_pool, self.auth_queue, hard_limit)
         try:
             loop.run_until_complete(self._serve(ready, failure))
             loop.run_until_complete(loop.shutdown_default_executor())

@@ -208,7 +208,7 @@ async def test_wrong_passwords_beyond_the_bcrypt_queue_are_refused_at_once() -> 
                 gate.clear()
                 # bcrypt held and its queue full again: the verified scraper passes first
                 wrong = [asyncio.create_task(get(f"wrong again {i}")) for i in range(AUTH_QUEUE)]
-                await until(lambda: server._auth_pending == AUTH_QUEUE, 20, "a full queue")
+                await until(lambda: server.auth_pending == AUTH_QUEUE, 20, "a full queue")
                 ok = await get("correct horse")
                 assert ok.status == 200 and not any(t.done() for t in wrong)
                 gate.set()
@@ -242,7 +242,7 @@ async def test_stopping_with_bcrypt_checks_queued_leaves_no_pending_task(
             s = socket.create_connection(("127.0.0.1", server.port), timeout=10)
             s.sendall(b"GET /metrics HTTP/1.1\r\nHost: x\r\n" + wrong + b"\r\n")
             socks.append(s)
-        await until(lambda: server._auth_pending == AUTH_QUEUE, 20, "a full bcrypt queue")
+        await until(lambda: server.auth_pending == AUTH_QUEUE, 20, "a full bcrypt queue")
         for s in socks:  # the clients give up: nothing waits for their answers any more
             s.close()
     finally:

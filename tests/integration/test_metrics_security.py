@@ -223,7 +223,7 @@ def test_connections_beyond_the_cap_get_503_and_one_warning(
                 s = socket.create_connection(("127.0.0.1", server.port), timeout=5)
                 s.sendall(b"GET /metrics HTTP/1.1\r\nHost: x\r\n" + wrong + b"\r\n")
                 idle_sockets.append(s)
-            _wait_for(lambda: server._auth_pending == 20, 10, "20 requests in progress")
+            _wait_for(lambda: server.auth_pending == 20, 10, "20 requests in progress")
             refused = [_get(server.port) for _ in range(5)]
             assert all(r.startswith(b"HTTP/1.1 503 ") for r in refused), refused
             assert server.open_connections == 20
