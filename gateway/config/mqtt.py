@@ -7,7 +7,9 @@ levels without wildcards), ``gateway`` (this gateway's topic level, default the 
 ``qos`` (0 or 1), ``max_rate_hz`` (0: every poll; else at most that many frames per second per
 device), ``encoding`` (``json`` or ``binary``), ``protocol`` (``5`` or ``3.1.1``) and
 ``queue_frames`` (the bounded queue between polling and the broker; the oldest frames are
-dropped and counted when it is full).
+dropped and counted when it is full), ``max_batch_frames`` (at most that many waiting polls of
+a device in one message; 1: one message per poll) and ``batch_interval_s`` (while frames keep
+coming, messages leave at most this often, so that the frames polled meanwhile share one).
 """
 
 from __future__ import annotations
@@ -40,10 +42,19 @@ _KEYS: Final = (
     "encoding",
     "protocol",
     "queue_frames",
+    "max_batch_frames",
+    "batch_interval_s",
 )
 _TLS_KEYS: Final = ("ca_file", "cert_file", "key_file", "verify")
 _CLIENT_ID_RE: Final = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 _RATE: Final = Interval(0.0, 10_000.0, low_inclusive=True)
+#: frames in one message at most: a 64-channel JSON frame is about 4.8 kB, so 1000 are about
+#: 5 MB, well inside a broker's default message limit (mosquitto: 256 MB)
+MAX_BATCH_FRAMES: Final = 1000
+#: defaults measured with ``python -m bench mqtt`` (docs/scaling.md, section 5)
+DEFAULT_MAX_BATCH_FRAMES: Final = 50
+DEFAULT_BATCH_INTERVAL_S: Final = 0.01
+_BATCH_INTERVAL: Final = Interval(0.0, 1.0, low_inclusive=True, high_inclusive=True)
 
 
 @dataclass(frozen=True)
@@ -71,12 +82,24 @@ class MqttConfig:
     encoding: str = "json"
     protocol: str = "5"
     queue_frames: int = 1000
+    max_batch_frames: int = DEFAULT_MAX_BATCH_FRAMES
+    batch_interval_s: float = DEFAULT_BATCH_INTERVAL_S
 
     def __post_init__(self) -> None:
         check_topic_level("mqtt: topic_prefix", self.topic_prefix, allow_slash=True)
         check_topic_level("mqtt: gateway", self.gateway, allow_slash=False)
         if self.qos not in (0, 1):
             raise ConfigError(f"mqtt: qos: {self.qos!r} is not allowed; allowed: 0, 1")
+        if not 1 <= self.max_batch_frames <= MAX_BATCH_FRAMES:
+            raise ConfigError(
+                f"mqtt: max_batch_frames: {self.max_batch_frames!r} is out of range; "
+                f"allowed: 1..{MAX_BATCH_FRAMES}"
+            )
+        if not _BATCH_INTERVAL.contains(self.batch_interval_s):
+            raise ConfigError(
+                f"mqtt: batch_interval_s: {self.batch_interval_s!r} is out of range; "
+                f"allowed: {_BATCH_INTERVAL.describe()} s"
+            )
 
     def topic(self, *levels: str) -> str:
         """``<prefix>/<gateway>/<levels...>``."""
@@ -160,5 +183,11 @@ def parse_mqtt(ctx: Context, root: Table) -> MqttConfig | None:
         "encoding": table.choice("encoding", "json", MQTT_ENCODINGS),
         "protocol": table.choice("protocol", "5", MQTT_PROTOCOLS),
         "queue_frames": table.integer("queue_frames", 1000, 1, 1_000_000),
+        "max_batch_frames": table.integer(
+            "max_batch_frames", DEFAULT_MAX_BATCH_FRAMES, 1, MAX_BATCH_FRAMES, " frames per message"
+        ),
+        "batch_interval_s": table.number(
+            "batch_interval_s", DEFAULT_BATCH_INTERVAL_S, _BATCH_INTERVAL, " s (0: never wait)"
+        ),
     }
     return MqttConfig(host, port, tls, username, password_file, client_id, prefix, gateway, **data)

@@ -1,8 +1,8 @@
 """Received messages into frames (pure, no broker): ``FrameStream`` turns the messages of the
 ``meta`` and ``frame`` topics into ``Frame`` objects (JSON frames as they are; binary frames
 decoded with the channel names and encoding of the device's retained meta message, held back
-until that message has arrived) and ``SequenceTracker`` notices gaps, duplicates and restarts
-in the per-device sequence numbers.
+until that message has arrived; a batch, JSON or binary, into its frames in order) and
+``SequenceTracker`` notices gaps, duplicates and restarts in the per-device sequence numbers.
 """
 
 from __future__ import annotations
@@ -13,10 +13,14 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Final
 
-from .payload import BINARY_MAGIC, FrameDecodeError, decode_binary
+from .payload import BATCH_MAGIC, BINARY_MAGIC, FrameDecodeError, decode_binary, split_binary_batch
 
-#: Frames of a device kept while its retained meta message has not arrived (binary frames
-#: need its channel names); beyond that the oldest are decoded with index names.
+#: the first bytes of a binary message: a frame or a batch of frames
+_BINARY_MAGICS: Final = (BINARY_MAGIC, BATCH_MAGIC)
+
+#: Binary messages (frames or batches) of a device kept while its retained meta message has
+#: not arrived (binary frames need its channel names); beyond that the oldest are decoded
+#: with index names.
 PENDING_LIMIT: Final = 2000
 #: Bytes held for meta messages over all devices: a flood of binary frames under ever new
 #: device names cannot fill the memory. Beyond it a device's oldest held frames are dropped
@@ -101,21 +105,42 @@ def _check_times(fields: dict[str, Any]) -> None:
             raise FrameDecodeError(f"a frame whose {key} is {value}, not a finite time")
 
 
-def decode_json_frame(data: bytes, device: str) -> dict[str, Any]:
-    """A JSON frame, checked for the fields a subscriber uses (``FrameDecodeError`` if not:
-    also for JSON Python cannot read, such as arrays nested 100,000 deep or an integer of
-    more than 4300 digits)."""
+def _json_object(data: bytes) -> Any:
     try:
-        fields = json.loads(data)
+        return json.loads(data)
     except RecursionError:
         raise FrameDecodeError("not a JSON frame: nested too deeply") from None
     except ValueError as exc:  # JSONDecodeError, UnicodeDecodeError, an integer too long
         raise FrameDecodeError(f"not a JSON frame: {str(exc).split(';')[0][:200]}") from None
+
+
+def _json_fields(fields: Any, device: str) -> dict[str, Any]:
     if not isinstance(fields, dict):
         raise FrameDecodeError("not a JSON frame: not an object")
     _check_json_fields(fields)
     fields.setdefault("device", device)
     return fields
+
+
+def decode_json_frame(data: bytes, device: str) -> dict[str, Any]:
+    """A JSON frame, checked for the fields a subscriber uses (``FrameDecodeError`` if not:
+    also for JSON Python cannot read, such as arrays nested 100,000 deep or an integer of
+    more than 4300 digits)."""
+    return _json_fields(_json_object(data), device)
+
+
+def decode_json_message(data: bytes, device: str) -> list[dict[str, Any]]:
+    """The frames of a JSON message: one frame, or a batch ``{"frames":[...]}`` (in order),
+    each checked as ``decode_json_frame`` checks one. A batch is taken whole or refused whole."""
+    obj = _json_object(data)
+    if not (isinstance(obj, dict) and "frames" in obj and "sequence" not in obj):
+        return [_json_fields(obj, device)]
+    frames = obj["frames"]
+    if not isinstance(frames, list):
+        raise FrameDecodeError("a batch whose frames are not a list")
+    if not frames:
+        raise FrameDecodeError("a batch of no frames")
+    return [_json_fields(f, device) for f in frames]
 
 
 class SequenceTracker:
@@ -198,7 +223,7 @@ class FrameStream:
         if kind == "meta":
             return self._meta(key, payload)
         meta = self.meta.get(key)
-        if meta is None and payload[:4] == BINARY_MAGIC:
+        if meta is None and payload[:4] in _BINARY_MAGICS:
             return self._hold(key, payload)
         return self._decode(key, [payload], meta)
 
@@ -271,30 +296,37 @@ class FrameStream:
         notices: list[str] = []
         for payload in payloads:
             try:
-                fields = self._fields(key, payload, meta)
+                message = self._fields(key, payload, meta)
             except FrameDecodeError as exc:
                 self.stats.undecodable += 1
                 self.stats.last_error = str(exc)
                 notices.append(f"{key[0]}/{key[1]}: a frame could not be decoded: {exc}")
                 continue
-            accept, missing, restarted = self.sequences.observe(key, int(fields["sequence"]))
-            if not accept:
-                continue
-            self.stats.frames += 1
-            self.stats.devices.add(key)
-            frames.append(Frame(key[0], key[1], fields, missing, restarted))
+            for fields in message:  # a batch's frames in order, each with its own sequence
+                accept, missing, restarted = self.sequences.observe(key, int(fields["sequence"]))
+                if not accept:
+                    continue
+                self.stats.frames += 1
+                self.stats.devices.add(key)
+                frames.append(Frame(key[0], key[1], fields, missing, restarted))
         return frames, notices
 
     @staticmethod
-    def _fields(key: tuple[str, str], payload: bytes, meta: dict[str, Any] | None) -> dict[str, Any]:
-        binary = payload[:4] == BINARY_MAGIC if meta is None else meta["encoding"] == "binary"
+    def _fields(key: tuple[str, str], payload: bytes, meta: dict[str, Any] | None) -> list[dict[str, Any]]:
+        """The frames of one message (one, or a batch's in order); ``FrameDecodeError`` if any
+        of them cannot be decoded (a batch is taken whole or not at all)."""
+        binary = payload[:4] in _BINARY_MAGICS if meta is None else meta["encoding"] == "binary"
         if not binary:
-            return decode_json_frame(payload, key[1])
+            return decode_json_message(payload, key[1])
         names = None if meta is None else list(meta["channels"])
-        fields = decode_binary(payload, key[1], names)
-        _check_times(fields)
-        if names is not None and len(fields["force_n"]) != len(names):
-            raise FrameDecodeError(
-                f"the frame has {len(fields['force_n'])} channels, its meta message names {len(names)}"
-            )
-        return fields
+        parts = split_binary_batch(payload) if payload[:4] == BATCH_MAGIC else [payload]
+        out = []
+        for part in parts:
+            fields = decode_binary(part, key[1], names)
+            _check_times(fields)
+            if names is not None and len(fields["force_n"]) != len(names):
+                raise FrameDecodeError(
+                    f"the frame has {len(fields['force_n'])} channels, its meta message names {len(names)}"
+                )
+            out.append(fields)
+        return out

@@ -80,7 +80,9 @@ class MqttLink(Collector):
         with self._lock:
             publisher, carried = self._publisher, self._carried
         if publisher is None:
-            return MqttStats(dict(carried.published), dict(carried.dropped), False, 0)
+            return MqttStats(
+                dict(carried.published), dict(carried.dropped), False, 0, dict(carried.sent), carried.messages
+            )
         return _add(carried, publisher.stats(), live=True)
 
     def collect(self) -> Iterable[Metric]:
@@ -116,4 +118,14 @@ def _add(a: MqttStats, b: MqttStats, live: bool = False) -> MqttStats:
     dropped = dict(a.dropped)
     for k, v in b.dropped.items():
         dropped[k] = dropped.get(k, 0) + v
-    return MqttStats(published, dropped, b.connected if live else False, b.queued if live else 0)
+    sent = dict(a.sent)
+    for k, v in b.sent.items():
+        sent[k] = sent.get(k, 0) + v
+    return MqttStats(
+        published,
+        dropped,
+        b.connected if live else False,
+        b.queued if live else 0,
+        sent,
+        a.messages + b.messages,
+    )

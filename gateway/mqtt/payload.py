@@ -1,4 +1,5 @@
-"""MQTT frames: one message per poll of a device, as JSON or as a compact binary layout.
+"""MQTT frames: one message per poll of a device, as JSON or as a compact binary layout, or
+several polls of a device in one message (a batch) when frames wait.
 
 A frame carries a per-device sequence number (consecutive polls: a gap means frames were
 dropped), the device clock (s, or null), the host's Unix time (s), the array quantities, and
@@ -28,6 +29,16 @@ Binary layout (little-endian, ``BINARY_VERSION`` 1)::
             n float32  force_static_n
             n float32  resistance_ohm
             n uint8    status (``ChannelStatus`` values)
+
+A batch carries two or more frames of one device, each whole, in the order of their sequence
+numbers (``docs/mqtt.md``, "Batches"). JSON: ``{"frames":[<frame>,<frame>,...]}``, each element
+the single-frame object byte for byte. Binary (little-endian)::
+
+    offset  type       field
+    0       4 bytes    magic b"TGB1"
+    4       uint32     count, the number of frames
+    8       count binary frames (``TGF1`` above) back to back; each one's length is
+            64 + 13 n, n from its own header
 """
 
 from __future__ import annotations
@@ -44,19 +55,25 @@ from ..runtime.frame import DECIMALS, Frame, compact_json, frame_of
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
 __all__ = [
+    "BATCH_MAGIC",
     "BINARY_MAGIC",
     "DECIMALS",
     "FrameDecodeError",
     "FrameFields",
     "decode_binary",
+    "decode_binary_batch",
     "encode_binary",
+    "encode_binary_batch",
     "encode_json",
+    "encode_json_batch",
     "encode_json_frame",
     "frame_dict",
     "json_body",
 ]
 
 BINARY_MAGIC: Final = b"TGF1"
+BATCH_MAGIC: Final = b"TGB1"
+_BATCH_HEADER: Final = struct.Struct("<4sI")
 _HEADER: Final = struct.Struct("<4sQdddddd HH")
 _LABELS: Final = tuple(STATUS_LABELS)
 
@@ -198,3 +215,46 @@ def decode_binary(data: bytes, device: str = "", channels: list[str] | None = No
         "resistance_ohm": values[2],
         "status": [STATUS_LABELS[c] for c in codes],
     }
+
+
+def encode_json_batch(frames: list[bytes]) -> bytes:
+    """A JSON batch of encoded single-frame JSON messages (``encode_json``,
+    ``encode_json_frame``): ``{"frames":[...]}``, each frame byte for byte as alone."""
+    return b'{"frames":[' + b",".join(frames) + b"]}"
+
+
+def encode_binary_batch(frames: list[bytes]) -> bytes:
+    """A binary batch of encoded binary frames (``encode_binary``): magic, count, the frames."""
+    return _BATCH_HEADER.pack(BATCH_MAGIC, len(frames)) + b"".join(frames)
+
+
+def split_binary_batch(data: bytes) -> list[bytes]:
+    """The binary frames of a binary batch, each checked for its magic and its length
+    (``FrameDecodeError`` if the bytes are not such a batch)."""
+    if len(data) < _BATCH_HEADER.size:
+        raise FrameDecodeError(f"a binary batch has at least {_BATCH_HEADER.size} bytes, got {len(data)}")
+    magic, count = _BATCH_HEADER.unpack_from(data)
+    if magic != BATCH_MAGIC:
+        raise FrameDecodeError(f"not a binary batch: magic {magic!r}, expected {BATCH_MAGIC!r}")
+    if count == 0:
+        raise FrameDecodeError("a batch of no frames")
+    offset, frames = _BATCH_HEADER.size, []
+    for k in range(count):
+        if len(data) - offset < _HEADER.size:
+            raise FrameDecodeError(f"a binary batch of {count} frames ends inside binary frame {k + 1}")
+        n = struct.unpack_from("<H", data, offset + _HEADER.size - 2)[0]
+        end = offset + _HEADER.size + n * (3 * 4 + 1)
+        if end > len(data):
+            raise FrameDecodeError(f"a binary batch of {count} frames ends inside binary frame {k + 1}")
+        frames.append(data[offset:end])
+        offset = end
+    if offset != len(data):
+        raise FrameDecodeError(f"a binary batch of {count} frames has {len(data) - offset} bytes after them")
+    return frames
+
+
+def decode_binary_batch(
+    data: bytes, device: str = "", channels: list[str] | None = None
+) -> list[dict[str, Any]]:
+    """A binary batch back into its frames' fields, in order (``decode_binary`` of each)."""
+    return [decode_binary(frame, device, channels) for frame in split_binary_batch(data)]

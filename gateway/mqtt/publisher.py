@@ -3,7 +3,11 @@
 ``on_snapshot`` (subscribed to the poller's ``SnapshotHolder``) only appends the new device
 snapshots to a bounded queue, so polling never waits on the broker. One thread owns the
 paho client: it connects (TLS, user and password), drives the network loop, turns queued
-snapshots into frames (``payload``) and publishes them. When the broker is slow or gone the
+snapshots into frames (``payload``) and publishes them: one frame per message when one is
+waiting, several polls of a device in one message (a batch, at most ``max_batch_frames``)
+when more wait; while frames keep coming, messages leave at most every ``batch_interval_s``
+so that the polls in between share one (a message costs the client and the broker far more
+than the bytes of another frame in it). When the broker is slow or gone the
 queue fills and its oldest frames are dropped and counted; the thread reconnects after a
 jittered back-off (uniform in ``[0, b]``, b doubling from 0.5 s to 30 s). Sequence numbers
 count the polls of a device, so a subscriber sees a dropped frame as a gap. Nothing is
@@ -27,7 +31,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import paho.mqtt.client as mqtt
@@ -39,7 +43,14 @@ from ..config.tables import read_text_file
 from ..runtime.frame import frame_of
 from ..runtime.priority import polls_fast, yield_to_poll_loop
 from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
-from .payload import encode_binary, encode_json_frame, frame_dict, json_body
+from .payload import (
+    encode_binary,
+    encode_binary_batch,
+    encode_json_batch,
+    encode_json_frame,
+    frame_dict,
+    json_body,
+)
 
 __all__ = ["MqttPublisher", "MqttStats", "meta_dict"]
 
@@ -50,7 +61,7 @@ BACKOFF_MAX_S = 30.0
 KEEPALIVE_S = 15
 LOOP_TIMEOUT_S = 0.02
 STOP_FLUSH_S = 5.0
-#: QoS 1 frames sent and not yet acknowledged, at most (paho's default window)
+#: QoS 1 messages (a frame or a batch) sent and not yet acknowledged, at most (paho's default window)
 INFLIGHT_WINDOW = 20
 #: frames dropped are said at warning level at most this often, with the counts since
 DROP_LOG_INTERVAL_S = 10.0
@@ -59,12 +70,16 @@ DROP_LOG_INTERVAL_S = 10.0
 @dataclass(frozen=True)
 class MqttStats:
     """Counters for the metrics: frames published (acknowledged at QoS 1) and dropped, per
-    device; whether the broker connection is up; frames waiting."""
+    device; whether the broker connection is up; frames waiting; frames handed to the client
+    (``sent``, per device: published, in flight, or refused) and the messages that carried the
+    published frames (``messages``: fewer than the frames when they went out in batches)."""
 
     published: dict[str, int]
     dropped: dict[str, int]
     connected: bool
     queued: int
+    sent: dict[str, int] = field(default_factory=dict)
+    messages: int = 0
 
 
 def meta_dict(config: GatewayConfig, device_name: str, encoding: str) -> dict[str, Any]:
@@ -117,7 +132,10 @@ class MqttPublisher:
         self._last_sent: dict[str, float] = {}
         self._published: dict[str, int] = {}
         self._dropped: dict[str, int] = {}
-        self._in_flight: dict[int, str] = {}
+        self._sent: dict[str, int] = {}
+        self._messages = 0
+        self._in_flight: dict[int, tuple[str, int]] = {}  # message id: device, frames
+        self._last_drain_s = -math.inf  # monotonic time frames last went out
         self._connected = False
         self._stopping = False
         self._meta_due = True
@@ -153,7 +171,14 @@ class MqttPublisher:
 
     def stats(self) -> MqttStats:
         with self._cond:
-            return MqttStats(dict(self._published), dict(self._dropped), self._connected, len(self._queue))
+            return MqttStats(
+                dict(self._published),
+                dict(self._dropped),
+                self._connected,
+                len(self._queue),
+                dict(self._sent),
+                self._messages,
+            )
 
     def reload(self, config: GatewayConfig) -> None:
         """A new configuration of the same broker settings: republish the meta messages."""
@@ -237,9 +262,11 @@ class MqttPublisher:
 
     def _on_publish(self, client: mqtt.Client, userdata: Any, mid: int, reason: Any, props: Any) -> None:
         with self._cond:
-            name = self._in_flight.pop(mid, None)
-            if name is not None:
-                self._published[name] = self._published.get(name, 0) + 1
+            entry = self._in_flight.pop(mid, None)
+            if entry is not None:
+                name, frames = entry
+                self._published[name] = self._published.get(name, 0) + frames
+                self._messages += 1
 
     def _where(self) -> str:
         return f"{self.settings.host}:{self.settings.port}"
@@ -269,7 +296,7 @@ class MqttPublisher:
                     self._wait(self._rng.uniform(0.0, backoff))
                     backoff = min(BACKOFF_MAX_S, 2.0 * backoff)
                     continue
-            rc = self._client.loop(timeout=LOOP_TIMEOUT_S)
+            rc = self._client.loop(timeout=self._loop_timeout_s(time.monotonic()))
             if rc != mqtt.MQTT_ERR_SUCCESS:
                 socket_open = False
                 with self._cond:
@@ -278,8 +305,10 @@ class MqttPublisher:
                 self._wait(self._rng.uniform(0.0, backoff))
                 backoff = min(BACKOFF_MAX_S, 2.0 * backoff)
                 continue
-            self._drain()
-            self._report_drops(time.monotonic())
+            now = time.monotonic()
+            if self._drain_due(now):
+                self._drain(now)
+            self._report_drops(now)
         self._finish(socket_open)
         self._report_drops(time.monotonic(), at_stop=True)  # what the stop itself dropped too
 
@@ -312,34 +341,84 @@ class MqttPublisher:
             self.settings.queue_frames,
         )
 
-    def _drain(self) -> None:
-        """Publish what is queued while the connection is up (the meta messages first)."""
+    def _batching(self) -> bool:
+        return self.settings.max_batch_frames > 1 and self.settings.batch_interval_s > 0.0
+
+    def _drain_due(self, now: float) -> bool:
+        """Whether to publish now (``now``: monotonic s): always without batching; with it, once
+        ``batch_interval_s`` has passed since frames last went out, or a full batch waits (a
+        frame arriving after a quiet spell goes out at once), or the meta messages are due."""
+        if not self._batching() or now - self._last_drain_s >= self.settings.batch_interval_s:
+            return True
+        with self._cond:
+            return self._meta_due or len(self._queue) >= self.settings.max_batch_frames
+
+    def _loop_timeout_s(self, now: float) -> float:
+        """How long the network loop may wait for the socket: until the next drain is due."""
+        if not self._batching() or not self._queue:
+            return LOOP_TIMEOUT_S
+        due = self._last_drain_s + self.settings.batch_interval_s - now
+        return min(LOOP_TIMEOUT_S, max(0.0, due))
+
+    def _take(self, messages: int) -> list[list[tuple[str, int, DeviceSnapshot]]]:
+        """At most ``messages`` groups of queued frames (the caller holds the lock), each of one
+        device, at most ``max_batch_frames``, in queue order; a device's frames in sequence
+        order; frames of other devices passed over stay at the front, in order."""
+        groups: list[list[tuple[str, int, DeviceSnapshot]]] = []
+        limit = self.settings.max_batch_frames
+        while len(groups) < messages and self._queue:
+            name = self._queue[0][0]
+            group: list[tuple[str, int, DeviceSnapshot]] = []
+            others: list[tuple[str, int, DeviceSnapshot]] = []
+            while self._queue and len(group) < limit:
+                item = self._queue.popleft()
+                (group if item[0] == name else others).append(item)
+            self._queue.extendleft(reversed(others))
+            groups.append(group)
+        return groups
+
+    def _payload(self, group: list[tuple[str, int, DeviceSnapshot]]) -> bytes:
+        """One message: the single frame as ever, or a batch of the group's frames."""
+        if self.settings.encoding == "binary":
+            frames = [encode_binary(frame_dict(frame_of(snap), seq)) for _, seq, snap in group]
+            return frames[0] if len(frames) == 1 else encode_binary_batch(frames)
+        # built once per snapshot (by the poll loop, see ``derivations``), shared with the page
+        bodies = [encode_json_frame(snap, seq) for _, seq, snap in group]
+        return bodies[0] if len(bodies) == 1 else encode_json_batch(bodies)
+
+    def _drain(self, now: float | None = None) -> None:
+        """Publish what is queued while the connection is up (the meta messages first); ``now``
+        (monotonic s) is when, for ``batch_interval_s``."""
         with self._cond:
             if not self._connected:
                 return
             meta_due, self._meta_due = self._meta_due, False
             config = self._config
-            # at QoS 1 only as many as the window has room for: the rest wait in this queue
-            # (bounded, oldest dropped), not in paho's, whose every acknowledgement scans all
-            # it holds (a backlog there grows the cost of each frame with the backlog)
+            # at QoS 1 only as many messages as the window has room for: the rest wait in this
+            # queue (bounded, oldest dropped), not in paho's, whose every acknowledgement scans
+            # all it holds (a backlog there grows the cost of each message with the backlog)
             room = len(self._queue) if self.settings.qos == 0 else INFLIGHT_WINDOW - len(self._in_flight)
-            batch = [self._queue.popleft() for _ in range(max(0, min(room, len(self._queue))))]
+            groups = self._take(max(0, room))
         if meta_due:
             for _, device in config.devices():
                 payload = json.dumps(meta_dict(config, device.name, self.settings.encoding))
                 self._client.publish(self.settings.topic(device.name, "meta"), payload, qos=1, retain=True)
-        binary = self.settings.encoding == "binary"
-        for name, seq, snap in batch:
-            # built once per snapshot (by the poll loop, see ``derivations``), shared with the page
-            data = encode_binary(frame_dict(frame_of(snap), seq)) if binary else encode_json_frame(snap, seq)
-            info = self._client.publish(self.settings.topic(name, "frame"), data, qos=self.settings.qos)
+        if groups:
+            self._last_drain_s = time.monotonic() if now is None else now
+        for group in groups:
+            name, frames = group[0][0], len(group)
+            info = self._client.publish(
+                self.settings.topic(name, "frame"), self._payload(group), qos=self.settings.qos
+            )
             with self._cond:
+                self._sent[name] = self._sent.get(name, 0) + frames
                 if info.rc != mqtt.MQTT_ERR_SUCCESS:
-                    self._dropped[name] = self._dropped.get(name, 0) + 1
+                    self._dropped[name] = self._dropped.get(name, 0) + frames
                 elif self.settings.qos == 0:
-                    self._published[name] = self._published.get(name, 0) + 1
+                    self._published[name] = self._published.get(name, 0) + frames
+                    self._messages += 1
                 else:
-                    self._in_flight[info.mid] = name
+                    self._in_flight[info.mid] = (name, frames)
 
     def _finish(self, socket_open: bool) -> None:
         if socket_open and self._connected:
@@ -362,6 +441,9 @@ class MqttPublisher:
             for name, _, _ in self._queue:
                 self._dropped[name] = self._dropped.get(name, 0) + 1
             self._queue.clear()
-            for name in self._in_flight.values():  # never acknowledged: not delivered, as far as we know
-                self._dropped[name] = self._dropped.get(name, 0) + 1
+            for (
+                name,
+                frames,
+            ) in self._in_flight.values():  # never acknowledged: not delivered, as far as we know
+                self._dropped[name] = self._dropped.get(name, 0) + frames
             self._in_flight.clear()

@@ -71,6 +71,15 @@ class Subscriber:
         with self.lock:
             return [p for t, p, _ in self.messages if t.endswith(suffix)]
 
+    def frames(self) -> list[dict[str, Any]]:
+        """The JSON frames received, in order: a batch (``{"frames": [...]}``, docs/mqtt.md)
+        is its frames."""
+        out: list[dict[str, Any]] = []
+        for payload in self.of("/frame"):
+            obj = json.loads(payload)
+            out += obj.get("frames", [obj])
+        return out
+
     def close(self) -> None:
         self.client.disconnect()
         self.client.loop_stop()
@@ -150,9 +159,9 @@ async def test_every_frame_arrives_in_order_with_the_exported_values(tmp_path: P
         finally:
             publisher.stop()
         stats = publisher.stats()
-        assert await until(lambda: len(sub.of("/frame")) >= stats.published.get("arr", 0), 10.0)
+        assert await until(lambda: len(sub.frames()) >= stats.published.get("arr", 0), 10.0)
         sub.close()
-    frames = [json.loads(p) for p in sub.of("/frame")]
+    frames = sub.frames()
     seqs = [f["sequence"] for f in frames]
     assert seqs == list(range(1, len(exported.by_seq) + 1)), "every poll, in order, once"
     assert stats.dropped.get("arr", 0) == 0 and stats.published["arr"] == len(frames)
@@ -179,11 +188,11 @@ async def _first_frames(tmp_path: Path, broker: Broker, sim_port: int, n: int) -
     publisher.start()
     try:
         async with Poller(config, holder):
-            assert await until(lambda: len(sub.of("/frame")) >= n, 20.0)
+            assert await until(lambda: len(sub.frames()) >= n, 20.0)
     finally:
         publisher.stop()
         sub.close()
-    return [json.loads(p) for p in sub.of("/frame")[:n]]
+    return sub.frames()[:n]
 
 
 async def test_the_first_frame_is_the_first_poll_not_a_fake_outage(tmp_path: Path, broker: Broker) -> None:
@@ -238,12 +247,10 @@ async def test_a_broker_restart_loses_only_the_counted_frames(tmp_path: Path, br
         total = len(exported.by_seq)
         dropped = stats.dropped.get("arr", 0)
         try:
-            await until(
-                lambda: len({json.loads(p)["sequence"] for p in sub.of("/frame")}) >= total - dropped, 20.0
-            )
+            await until(lambda: len({f["sequence"] for f in sub.frames()}) >= total - dropped, 20.0)
         finally:
             sub.close()
-    received = {json.loads(p)["sequence"] for p in sub.of("/frame")}
+    received = {f["sequence"] for f in sub.frames()}
     assert len(received) + dropped == total, (len(received), dropped, total)
     assert received <= set(range(1, total + 1))
 

@@ -4,7 +4,8 @@ At QoS 1 the publisher hands paho at most ``INFLIGHT_WINDOW`` frames that the br
 acknowledged; the others wait in the publisher's own bounded queue (its oldest dropped and
 counted when full), in order, and go out as acknowledgements come back. At QoS 0 nothing is
 acknowledged and everything queued goes out at once. Frames keep their sequence numbers and
-bytes whichever way they wait.
+bytes whichever way they wait. These run with ``max_batch_frames = 1`` (one frame per message,
+so a message is a frame); batches are tested in ``test_mqtt_batch.py``.
 """
 
 from __future__ import annotations
@@ -63,8 +64,9 @@ def config(qos: int, queue_frames: int) -> GatewayConfig:
     device = device_config_for("arr", 1, [SensorParams()] * 4, 2, 2.5)
     bus = bus_config_for("sim", "tcp", [device], host="127.0.0.1", port=5020)
     mqtt = MqttConfig(
-        "127.0.0.1", 1883, None, None, None, "t", "tactile", "gw", qos=qos, queue_frames=queue_frames
-    )
+        "127.0.0.1", 1883, None, None, None, "t", "tactile", "gw", qos=qos, queue_frames=queue_frames,
+        max_batch_frames=1,
+    )  # fmt: skip
     return dataclasses.replace(gateway_config_for([bus]), mqtt=mqtt)
 
 
