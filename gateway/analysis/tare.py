@@ -46,6 +46,8 @@ __all__ = [
     "compute_tare",
     "compute_tare_series",
     "index_ranges",
+    "samples_to_series",
+    "thirds_drift",
 ]
 
 MIN_POLLS: Final = 10
@@ -139,14 +141,7 @@ def compute_tare(
             "nothing was written"
         )
     adc = device.encoding is Encoding.ADC
-    keep = [k for k, s in enumerate(samples) if (s.counts if adc else s.resistance_ohm) is not None]
-    if len(keep) < MIN_POLLS:
-        raise TareError("the samples carry no values of this device's encoding; nothing was written")
-    data = np.array(
-        [np.asarray(samples[k].counts if adc else samples[k].resistance_ohm, dtype=np.float64) for k in keep]
-    )
-    t = None if times_s is None else np.asarray([times_s[k] for k in keep], dtype=np.float64)
-    series = [ChannelSeries(i, data[:, i], t) for i in chosen]
+    series = samples_to_series(device, samples, channels=chosen, times_s=times_s)
     return compute_tare_series(
         device,
         series,
@@ -156,6 +151,29 @@ def compute_tare(
         max_noise_counts=max_noise_counts,
         max_noise_rel=max_noise_rel,
     )
+
+
+def samples_to_series(
+    device: DeviceConfig,
+    samples: Sequence[RawSample],
+    *,
+    channels: Sequence[int] | None = None,
+    times_s: Sequence[float] | None = None,
+) -> list[ChannelSeries]:
+    """One ``ChannelSeries`` per channel of ``channels`` (indices; default all) from polls of
+    ``device``: ADC counts for an ADC device, else ohm, at ``times_s`` (s; optional); a poll
+    without values of the device's encoding is left out. ``TareError`` when fewer than
+    ``MIN_POLLS`` polls carry values."""
+    chosen = list(range(device.n_channels)) if channels is None else sorted(set(channels))
+    adc = device.encoding is Encoding.ADC
+    keep = [k for k, s in enumerate(samples) if (s.counts if adc else s.resistance_ohm) is not None]
+    if len(keep) < MIN_POLLS:
+        raise TareError("the samples carry no values of this device's encoding; nothing was written")
+    data = np.array(
+        [np.asarray(samples[k].counts if adc else samples[k].resistance_ohm, dtype=np.float64) for k in keep]
+    )
+    t = None if times_s is None else np.asarray([times_s[k] for k in keep], dtype=np.float64)
+    return [ChannelSeries(i, data[:, i], t) for i in chosen]
 
 
 def _loaded_message(
@@ -196,6 +214,19 @@ def _distinct(values: FloatArray) -> FloatArray:
     return kept if kept.size >= 2 else values[[0, -1]]
 
 
+def thirds_drift(values: FloatArray) -> tuple[float, float]:
+    """(drift, its standard error) of a series of at least two values: the mean of its last
+    third minus that of its first third, and the standard error of that difference from the
+    scatter within the two thirds (a step between them is a drift, not noise; a value a device
+    repeats between its frame updates counts once)."""
+    third = max(1, values.size // 3)
+    first, last = _distinct(values[:third]), _distinct(values[-third:])
+    with np.errstate(invalid="ignore"):
+        drift = float(values[-third:].mean() - values[:third].mean())
+        std_err = math.sqrt(first.var(ddof=1) / first.size + last.var(ddof=1) / last.size)
+    return drift, std_err
+
+
 def compute_tare_series(
     device: DeviceConfig,
     series: Sequence[ChannelSeries],
@@ -232,12 +263,7 @@ def compute_tare_series(
             third = max(1, v.size // 3)
             mean[k] = v.mean()
             std[k] = v.std(ddof=1)
-            drift[k] = v[-third:].mean() - v[:third].mean()
-            # the scatter within each third, so that a step (a load landing) is a drift, not
-            # noise; a device that updates its frame more slowly than it is polled repeats a
-            # sample, which is one measurement however often it is read
-            first, last = _distinct(v[:third]), _distinct(v[-third:])
-            std_err[k] = math.sqrt(first.var(ddof=1) / first.size + last.var(ddof=1) / last.size)
+            drift[k], std_err[k] = thirds_drift(v)
             if s.time_s is not None:
                 span = float(s.time_s[-third:].mean() - s.time_s[:third].mean())
                 if span > 0:

@@ -1,0 +1,319 @@
+"""Zero under a moving load: each channel's baseline from its own unloaded moments in a window.
+
+An array that is never wholly unloaded (a hand, a part sliding across it) still leaves each
+channel unloaded for part of the time. Over a window of polls every channel is searched on its
+own (``rest_stretch``) for a stretch of at least ``MIN_POLLS`` polls that is
+
+* at the channel's own extreme: its least loaded level, the highest resistance (the lowest
+  conductance) it reached, taken as the best mean of ``MIN_POLLS`` consecutive polls; a poll
+  belongs to the plateau there when it is within ``max(floor, 4 sigma)`` of that level (the
+  tare's drift floor: 2 counts, or 0.5 % of the reading in ohm; sigma the channel's noise from
+  its poll-to-poll steps within those ``MIN_POLLS`` polls, robust to a step and blind to the
+  load's jitter elsewhere in the window);
+* still: the tare's MOVING check (first third against last third) passes within the stretch.
+  An FSR lifted after a load creeps back to its baseline over seconds to tens of seconds, so a
+  stretch that still moves is cut from its start (its first third dropped) until it is still
+  or too short: the recovery is left out, the settled end kept;
+* the latest such stretch: the channel's state nearest the end of the window (temperature,
+  drift), and after any recovery.
+
+Its mean is the baseline. The checks of the whole-array tare then run per channel, each a
+reason the channel is not zeroed (and its baseline left as the file has it, ``"none"`` if it
+has none), with numbers, in this order:
+
+* FAULTY: a short or an invalid reading at the channel's extreme;
+* LOADED (loaded throughout): at its least loaded the model reads more than ``max_force_n``
+  (N), or it conducts more than ``LOADED_FACTOR`` times the median channel's (at least 4
+  channels, each at its own least loaded);
+* MOVING (never still): no still stretch of ``MIN_POLLS`` polls at its extreme;
+* NOISY: the stretch's standard deviation exceeds the tare's noise limit.
+
+The search works on one series of numbers and a direction (``rest_stretch``), so it serves any
+baseline taken per channel or per region at its own minimum of load.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import DeviceConfig
+from ..model import DividerStatus, SensorModel
+from .tare import (
+    DRIFT_FLOOR_COUNTS,
+    DRIFT_FLOOR_REL,
+    LOADED_FACTOR,
+    MIN_POLLS,
+    ChannelSeries,
+    FloatArray,
+    TareError,
+    TareResult,
+    thirds_drift,
+)
+
+__all__ = ["RestSearch", "RestStretch", "WindowTare", "compute_window_tare", "rest_stretch"]
+
+#: the plateau band around a channel's extreme, in standard deviations of its noise
+PLATEAU_SIGMAS = 4.0
+#: a median absolute deviation times this is a standard deviation (normal noise)
+_MAD_TO_STD = 1.4826
+
+
+@dataclass(frozen=True)
+class RestStretch:
+    """Polls ``start`` to ``stop`` (exclusive) of a series: their ``mean`` and standard
+    deviation ``std`` (the series' units), and ``drift`` (mean of the last third minus that of
+    the first) with its standard error ``drift_err``."""
+
+    start: int
+    stop: int
+    mean: float
+    std: float
+    drift: float
+    drift_err: float
+
+    @property
+    def n_polls(self) -> int:
+        return self.stop - self.start
+
+
+@dataclass(frozen=True)
+class RestSearch:
+    """What ``rest_stretch`` found: ``stretch`` the latest still stretch at the extreme (None
+    if there is none), ``top`` the ``min_polls`` polls of the extreme itself (None with fewer
+    polls), ``moving`` the last stretch at the extreme found to move (for the reason), ``why``
+    the reason there is no stretch ("" when there is one)."""
+
+    stretch: RestStretch | None
+    top: RestStretch | None
+    moving: RestStretch | None
+    why: str
+
+    @property
+    def level(self) -> float:
+        """The extreme (least loaded) level: the best mean of ``min_polls`` polls (NaN if none)."""
+        return float("nan") if self.top is None else self.top.mean
+
+
+def _stretch(v: FloatArray, start: int, stop: int) -> RestStretch:
+    part = v[start:stop]
+    drift, err = thirds_drift(part)
+    return RestStretch(start, stop, float(part.mean()), float(part.std(ddof=1)), drift, err)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of every run of True in ``mask``."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def rest_stretch(
+    values: FloatArray,
+    *,
+    unloaded_high: bool = True,
+    floor_abs: float = 0.0,
+    floor_rel: float = 0.0,
+    min_polls: int = MIN_POLLS,
+) -> RestSearch:
+    """The latest still stretch of ``values`` (one channel's polls, in order) at its own least
+    loaded level: the highest values when ``unloaded_high`` (resistance, or counts that rise
+    with it), else the lowest. The drift floor is ``max(floor_abs, floor_rel * |level|)`` (the
+    values' units); see the module docstring."""
+    v = np.asarray(values, dtype=np.float64)
+    x = v if unloaded_high else -v
+    finite = np.isfinite(x)
+    if v.size < min_polls:
+        return RestSearch(None, None, None, f"only {v.size} polls")
+    window_sum = np.convolve(np.where(finite, x, 0.0), np.ones(min_polls), mode="valid")
+    whole = np.convolve(finite.astype(np.float64), np.ones(min_polls), mode="valid") == min_polls
+    if not whole.any():
+        return RestSearch(None, None, None, f"no {min_polls} consecutive valid polls")
+    best = int(np.flatnonzero(whole)[np.argmax(np.where(whole, window_sum, -np.inf)[whole])])
+    top = _stretch(v, best, best + min_polls)
+    level = float(window_sum[best] / min_polls)
+    # the noise from the poll-to-poll steps at the extreme: a moving load elsewhere in the
+    # window makes large steps, which say nothing of the channel at rest
+    steps = np.diff(x[best : best + min_polls])
+    sigma = _MAD_TO_STD * float(np.median(np.abs(steps))) / np.sqrt(2.0)
+    floor = max(floor_abs, floor_rel * abs(level))
+    plateau = finite & (x >= level - max(floor, PLATEAU_SIGMAS * sigma))
+    moving: RestStretch | None = None
+    for start, stop in reversed(_runs(plateau)):
+        while stop - start >= min_polls:
+            found = _stretch(v, start, stop)
+            if abs(found.drift) <= max(floor, 4.0 * found.drift_err):
+                return RestSearch(found, top, moving, "")
+            moving = moving or found
+            start += (stop - start) // 3
+    return RestSearch(None, top, moving, f"never still at its own extreme for {min_polls} polls")
+
+
+@dataclass(frozen=True)
+class WindowTare:
+    """The result of a moving-load tare: ``tare`` the zeroed channels (their baselines, as a
+    whole-array tare gives them; ``n_polls`` the fewest polls of a stretch), ``spans_s`` one
+    (first, last) per zeroed channel: times of the stretch's polls (s, the series' clock) when
+    ``timed``, else poll indices; ``skipped`` (channel index, reason with numbers) for every
+    channel not zeroed."""
+
+    tare: TareResult
+    spans_s: tuple[tuple[float, float], ...]
+    timed: bool
+    skipped: tuple[tuple[int, str], ...]
+
+
+def _unloaded_high(device: DeviceConfig, counts: bool) -> bool:
+    """True when a larger value is a larger resistance: always in ohm; for counts, as the
+    device's front end turns them into ohm."""
+    if not counts:
+        return True
+    codes = np.linspace(0.0, float(device.front_end.full_scale), 65)
+    r, status = device.front_end.resistance(codes)
+    good = np.flatnonzero(np.isfinite(r) & (status == int(DividerStatus.OK)))
+    return bool(good.size < 2 or r[good[-1]] > r[good[0]])
+
+
+def _span(s: ChannelSeries, stretch: RestStretch) -> tuple[float, float]:
+    if s.time_s is None:
+        return float(stretch.start), float(stretch.stop - 1)
+    return float(s.time_s[stretch.start]), float(s.time_s[stretch.stop - 1])
+
+
+def _span_text(span: tuple[float, float], timed: bool) -> str:
+    a, b = span
+    return f"{a:.4g}-{b:.4g} s" if timed else f"polls {a:.0f}-{b:.0f}"
+
+
+def compute_window_tare(
+    device: DeviceConfig,
+    series: Sequence[ChannelSeries],
+    *,
+    counts: bool,
+    window: str = "the sampling window",
+    max_force_n: float = 0.5,
+    max_noise_counts: float = 8.0,
+    max_noise_rel: float = 0.02,
+) -> WindowTare:
+    """The baselines of the channels of ``series`` (ADC counts when ``counts``, else ohm), each
+    from its own latest still stretch at its least loaded level within ``window`` (words for
+    messages); the channels that have none are skipped with the reason. ``TareError`` when no
+    channel could be zeroed (see the module docstring)."""
+    if not series:
+        raise TareError("no channel to tare; nothing was written")
+    high = _unloaded_high(device, counts)
+    floor_abs, floor_rel = (DRIFT_FLOOR_COUNTS, 0.0) if counts else (0.0, DRIFT_FLOOR_REL)
+    found = [
+        rest_stretch(s.values, unloaded_high=high, floor_abs=floor_abs, floor_rel=floor_rel) for s in series
+    ]
+    m = len(series)
+    # each channel at its least loaded: its still stretch, else the extreme itself
+    rep = [f.stretch or f.top for f in found]
+    mean = np.array([np.nan if p is None else p.mean for p in rep])
+    labels = {int(st): st.name.lower() for st in DividerStatus}
+    if counts:
+        r, status = device.front_end.resistance(mean)
+        value = np.rint(mean)
+        _, rounded_status = device.front_end.resistance(value)
+        status = np.where(rounded_status == int(DividerStatus.OK), status, rounded_status)
+    else:
+        r = mean.copy()
+        status = np.where(np.isfinite(r) & (r > 0), int(DividerStatus.OK), int(DividerStatus.INVALID))
+        value = r
+    ok = status == int(DividerStatus.OK)
+    force = np.full(m, np.nan)
+    for k, s in enumerate(series):
+        if ok[k]:
+            ch = device.channels[s.index]
+            model = SensorModel(ch.effects, [ch.params])
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                force[k] = float(model.invert_static(np.array([r[k]])).force_n[0])
+    ratio = np.full(m, np.nan)
+    if np.count_nonzero(ok) >= 4:
+        conductance = np.where(ok, 1.0 / np.where(ok, r, 1.0), np.nan)
+        median = float(np.nanmedian(conductance))
+        if median > 0:
+            ratio = conductance / median
+    timed = all(s.time_s is not None for s in series)
+    skipped: list[tuple[int, str]] = []
+    zeroed: list[int] = []
+    for k, (s, f, p) in enumerate(zip(series, found, rep, strict=True)):
+        where = "" if p is None else f"({_span_text(_span(s, p), timed)}, {p.n_polls} polls)"
+        if p is None:
+            skipped.append((s.index, f"{f.why} in {window}"))
+        elif status[k] in (int(DividerStatus.SHORT), int(DividerStatus.INVALID)):
+            skipped.append((s.index, f"faulty at its least loaded {where}: {labels[int(status[k])]}"))
+        elif ok[k] and (force[k] > max_force_n or ratio[k] > LOADED_FACTOR):
+            skipped.append(
+                (
+                    s.index,
+                    f"loaded throughout {window}: at its least loaded {where} {force[k]:.3g} N by the "
+                    f"model at {r[k]:.4g} ohm, {ratio[k]:.2g}x the median conductance; allowed at rest: "
+                    f"at most {max_force_n:g} N (--max-force) and {LOADED_FACTOR:g}x the median",
+                )
+            )
+        elif f.stretch is None:
+            skipped.append((s.index, f"{f.why} in {window}{_moving_text(s, f.moving, counts, timed)}"))
+        elif (noise := _noisy(f.stretch, counts, max_noise_counts, max_noise_rel)) is not None:
+            skipped.append((s.index, f"too noisy {where}: {noise}"))
+        else:
+            zeroed.append(k)
+    if not zeroed:
+        shown = ", ".join(f"{device.channels[i].name} ({why})" for i, why in skipped[:6])
+        more = f" and {len(skipped) - 6} more" if len(skipped) > 6 else ""
+        raise TareError(f"no channel rested in {window}: {shown}{more}; nothing was written")
+    notes = [
+        f"{device.channels[series[k].index].name} read at a rail at rest ({labels[int(status[k])]}): the "
+        "baseline records it, and readings there stay flagged"
+        for k in zeroed
+        if not ok[k]
+    ]
+    stretches = [found[k].stretch for k in zeroed]
+    result = TareResult(
+        key="baseline_counts" if counts else "baseline_ohm",
+        values=tuple(float(value[k]) for k in zeroed),
+        resistance_ohm=tuple(float(r[k]) for k in zeroed),
+        force_before_n=tuple(float(force[k]) for k in zeroed),
+        noise=tuple(0.0 if p is None else p.std for p in stretches),
+        n_polls=min(0 if p is None else p.n_polls for p in stretches),
+        notes=tuple(notes),
+        channels=tuple(series[k].index for k in zeroed),
+    )
+    spans = tuple(_span(series[k], p) for k, p in zip(zeroed, stretches, strict=True) if p is not None)
+    return WindowTare(result, spans, timed, tuple(skipped))
+
+
+def _moving_text(s: ChannelSeries, moving: RestStretch | None, counts: bool, timed: bool) -> str:
+    if moving is None:
+        return ""
+    span = _span(s, moving)
+    rate = ""
+    seconds = span[1] - span[0]
+    if counts:
+        drift = f"{moving.drift:+.3g} counts"
+        if timed and seconds > 0:
+            rate = f", {moving.drift / seconds:+.3g} counts/s"
+        limit = f"{DRIFT_FLOOR_COUNTS:g} counts"
+    else:
+        drift = f"{100 * moving.drift / moving.mean:+.3g} %"
+        if timed and seconds > 0:
+            rate = f", {100 * moving.drift / moving.mean / seconds:+.3g} %/s"
+        limit = f"{100 * DRIFT_FLOOR_REL:g} % of the reading"
+    return (
+        f": its latest stretch there ({_span_text(span, timed)}) drifts {drift}{rate} "
+        f"(first third to last third; allowed: {limit} or 4 standard errors)"
+    )
+
+
+def _noisy(stretch: RestStretch, counts: bool, max_noise_counts: float, max_noise_rel: float) -> str | None:
+    if counts:
+        if stretch.std > max_noise_counts:
+            return f"std {stretch.std:.3g} counts; allowed: at most {max_noise_counts:g} counts (--max-noise)"
+        return None
+    if stretch.std > max_noise_rel * abs(stretch.mean):
+        return (
+            f"std {100 * stretch.std / stretch.mean:.3g} % of {stretch.mean:.4g} ohm; "
+            f"allowed: at most {100 * max_noise_rel:g} % of the reading"
+        )
+    return None
