@@ -135,11 +135,6 @@ def compute_tare(
     it at rest, polled at ``times_s`` (s; optional, for drift rates); ``TareError`` if they are
     not those of a still, unloaded array (see the module docstring)."""
     chosen = list(range(device.n_channels)) if channels is None else sorted(set(channels))
-    if len(samples) < MIN_POLLS:
-        raise TareError(
-            f"only {len(samples)} polls; a tare needs at least {MIN_POLLS} (sample longer); "
-            "nothing was written"
-        )
     adc = device.encoding is Encoding.ADC
     series = samples_to_series(device, samples, channels=chosen, times_s=times_s)
     return compute_tare_series(
@@ -162,9 +157,14 @@ def samples_to_series(
 ) -> list[ChannelSeries]:
     """One ``ChannelSeries`` per channel of ``channels`` (indices; default all) from polls of
     ``device``: ADC counts for an ADC device, else ohm, at ``times_s`` (s; optional); a poll
-    without values of the device's encoding is left out. ``TareError`` when fewer than
-    ``MIN_POLLS`` polls carry values."""
+    without values of the device's encoding is left out. ``TareError`` when there are fewer
+    than ``MIN_POLLS`` polls, or fewer than that carry values."""
     chosen = list(range(device.n_channels)) if channels is None else sorted(set(channels))
+    if len(samples) < MIN_POLLS:
+        raise TareError(
+            f"only {len(samples)} polls; a tare needs at least {MIN_POLLS} (sample longer); "
+            "nothing was written"
+        )
     adc = device.encoding is Encoding.ADC
     keep = [k for k, s in enumerate(samples) if (s.counts if adc else s.resistance_ohm) is not None]
     if len(keep) < MIN_POLLS:

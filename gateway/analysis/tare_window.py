@@ -153,15 +153,16 @@ def rest_stretch(
 @dataclass(frozen=True)
 class WindowTare:
     """The result of a moving-load tare: ``tare`` the zeroed channels (their baselines, as a
-    whole-array tare gives them; ``n_polls`` the fewest polls of a stretch), ``spans_s`` one
-    (first, last) per zeroed channel: times of the stretch's polls (s, the series' clock) when
-    ``timed``, else poll indices; ``skipped`` (channel index, reason with numbers) for every
-    channel not zeroed."""
+    whole-array tare gives them; ``tare.n_polls`` the fewest polls of a stretch); per zeroed
+    channel ``spans_s`` (first, last) the times of its stretch's polls (s, the series' clock)
+    when ``timed``, else poll indices, and ``n_polls`` its number of polls; ``skipped``
+    (channel index, reason with numbers) for every channel not zeroed."""
 
     tare: TareResult
     spans_s: tuple[tuple[float, float], ...]
     timed: bool
     skipped: tuple[tuple[int, str], ...]
+    n_polls: tuple[int, ...] = ()
 
 
 def _unloaded_high(device: DeviceConfig, counts: bool) -> bool:
@@ -281,7 +282,8 @@ def compute_window_tare(
         channels=tuple(series[k].index for k in zeroed),
     )
     spans = tuple(_span(series[k], p) for k, p in zip(zeroed, stretches, strict=True) if p is not None)
-    return WindowTare(result, spans, timed, tuple(skipped))
+    polls = tuple(p.n_polls for p in stretches if p is not None)
+    return WindowTare(result, spans, timed, tuple(skipped), polls)
 
 
 def _moving_text(s: ChannelSeries, moving: RestStretch | None, counts: bool, timed: bool) -> str:

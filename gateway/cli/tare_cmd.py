@@ -15,13 +15,16 @@ import numpy as np
 
 from ..analysis.records import names_text, read_record
 from ..analysis.tare import (
+    MIN_POLLS,
     ChannelSeries,
     TareError,
     TareResult,
     compute_tare,
     compute_tare_series,
+    samples_to_series,
 )
-from ..config import DeviceConfig, load_config
+from ..analysis.tare_window import WindowTare, compute_window_tare
+from ..config import DeviceConfig, Encoding, load_config
 from ..config.editor import find_devices, read_config_text, set_device_array
 from ..config.readout import NO_BASELINE
 from ..errors import ConfigError, DeviceError, RecordError
@@ -158,12 +161,37 @@ def merged_baselines(
     return key, values, notes
 
 
+def window_lines(device: DeviceConfig, moving: WindowTare, key: str) -> list[str]:
+    """One line per zeroed channel (its baseline as written under ``key``, and when it was
+    taken), then one per channel not zeroed (why, with numbers)."""
+    result = moving.tare
+    lines: list[str] = []
+    for k, i in enumerate(result.channels):
+        a, b = moving.spans_s[k]
+        when = f"{a:.4g}-{b:.4g} s" if moving.timed else f"polls {a:.0f}-{b:.0f}"
+        if key == "baseline_counts":
+            value = f"{result.values[k]:g} counts ({result.resistance_ohm[k]:.4g} ohm)"
+        elif result.key == "baseline_counts":
+            value = f"{result.resistance_ohm[k]:.5g} ohm ({result.values[k]:g} counts)"
+        else:
+            value = f"{result.values[k]:.5g} ohm"
+        lines.append(f"  {device.channels[i].name}: {value} at {when} ({moving.n_polls[k]} polls)")
+    lines.extend(f"not zeroed: {device.channels[i].name} ({why})" for i, why in moving.skipped)
+    return lines
+
+
 @click.command("tare")
 @config_option
 @click.option("--device", "device_name", default=None, help="The device to tare (default: the only one).")
 @click.option(
-    "--seconds", type=click.FloatRange(0.5, 600.0), default=3.0, show_default=True,
-    help="How long to sample the array at rest.",
+    "--seconds", type=click.FloatRange(0.5, 600.0), default=None,
+    help="How long to sample the array (s; default 3, and 30 with --moving-load).",
+)  # fmt: skip
+@click.option(
+    "--moving-load", is_flag=True,
+    help="The array is never wholly unloaded but the load moves: zero each channel from its own "
+    "latest still stretch at its least loaded level within the window (the sampled seconds, or "
+    "the record's --start-s..--end-s); a channel loaded throughout is named and not zeroed.",
 )  # fmt: skip
 @click.option(
     "--max-force", "max_force_n", type=click.FloatRange(0.0, 1e3), default=0.5, show_default=True,
@@ -198,7 +226,8 @@ def merged_baselines(
 def tare(
     config_path: Path,
     device_name: str | None,
-    seconds: float,
+    seconds: float | None,
+    moving_load: bool,
     max_force_n: float,
     max_noise_counts: float,
     channels_spec: str | None,
@@ -219,9 +248,21 @@ def tare(
     keep theirs. With --from-record the baselines come from a record's resistances over
     --start-s..--end-s (default: the whole record) and the device is not polled.
 
+    With --moving-load (a load that moves, never off the whole array at once) each channel's
+    baseline comes from its own unloaded moments within the window: its latest still stretch
+    (at least 10 polls) at its least loaded level, which leaves out the creep back after a
+    lift; the output says when each was taken, and a
+    channel loaded throughout is named, with its numbers, and not zeroed.
+
     With --device-zero the device zeroes itself (its configured `zero` action) and nothing is
     written to the configuration file.
     """
+    if device_zero and moving_load:
+        _fail(
+            "--moving-load takes baselines from samples, --device-zero has the device zero itself: choose one"
+        )
+    if seconds is None:
+        seconds = 30.0 if moving_load else 3.0
     if device_zero:
         bus, device = one_device("tare", config_path, device_name)
         run_device_action("tare", bus, device, "zero")
@@ -242,35 +283,52 @@ def tare(
     except ValueError as exc:
         _fail(str(exc))
     limits = {"max_force_n": max_force_n, "max_noise_counts": max_noise_counts}
+    moving: WindowTare | None = None
     if record_path is not None:
         try:
             series, window = record_series(record_path, device, chosen, start_s, end_s)
-            result = compute_tare_series(device, series, counts=False, window=window, **limits)
+            if moving_load:
+                moving = compute_window_tare(device, series, counts=False, window=window, **limits)
+                result = moving.tare
+            else:
+                result = compute_tare_series(device, series, counts=False, window=window, **limits)
         except (RecordError, ValueError) as exc:
             _fail(f"{exc}; nothing was written")
         except TareError as exc:
             _fail(f"device {device.name}: {exc}")
-        comment = f"tare: {window}"
+        comment = f"tare{' --moving-load' if moving_load else ''}: {window}"
     else:
-        click.echo(
-            f"sampling device {device.name} on {bus.endpoint} for {seconds:g} s; keep the array unloaded"
+        wanted = (
+            f"the load may move: each channel must rest, still and unloaded, for {MIN_POLLS} polls of it"
+            if moving_load
+            else "keep the array unloaded"
         )
+        click.echo(f"sampling device {device.name} on {bus.endpoint} for {seconds:g} s; {wanted}")
         try:
             samples = asyncio.run(sample_device(bus, device, seconds))
         except DeviceError as exc:
             _fail(f"device {device.name}: {exc}; nothing was written", 1)
+        window = f"the {seconds:g} s sampled"
+        # times from the first poll, so that a stretch reads as seconds into the window
+        times = [t - samples[0][0] for t, _ in samples] if samples else []
         try:
-            result = compute_tare(
-                device,
-                [s for _, s in samples],
-                channels=chosen,
-                times_s=[t for t, _ in samples],
-                window=f"the {seconds:g} s sampled",
-                **limits,
-            )
+            if moving_load:
+                series = samples_to_series(device, [s for _, s in samples], channels=chosen, times_s=times)
+                moving = compute_window_tare(
+                    device, series, counts=device.encoding is Encoding.ADC, window=window, **limits
+                )
+                result = moving.tare
+            else:
+                result = compute_tare(
+                    device, [s for _, s in samples], channels=chosen, times_s=times, window=window, **limits
+                )
         except TareError as exc:
             _fail(f"device {device.name}: {exc}")
-        comment = f"tare: {result.n_polls} polls over {seconds:g} s"
+        comment = (
+            f"tare --moving-load: {window}"
+            if moving_load
+            else f"tare: {result.n_polls} polls over {seconds:g} s"
+        )
     try:
         key, values, notes = merged_baselines(config_path, b, d, device, result)
     except ValueError as exc:
@@ -282,10 +340,15 @@ def tare(
         _fail(str(exc))
     before = [f for f in result.force_before_n if not math.isnan(f)]
     worst = max(before) if before else 0.0
+    how = "" if moving is None else f", each from its own still, unloaded stretch of {window}"
+    polls = f"{result.n_polls} polls" if moving is None else f"at least {result.n_polls} polls each"
     click.echo(
         f"{config_path}: device {device.name}: {key} written for {len(result.channels)} of "
-        f"{device.n_channels} channels ({result.n_polls} polls; without it the model read up to "
+        f"{device.n_channels} channels{how} ({polls}; without it the model read up to "
         f"{worst:.3g} N there at rest)"
     )
+    if moving is not None:
+        for line in window_lines(device, moving, key):
+            click.echo(line)
     for note in [*notes, *result.notes]:
         click.echo(f"note: {note}")
