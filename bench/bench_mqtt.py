@@ -5,11 +5,15 @@ persistence), with a simulated 64-channel array in its own process (as ``bench_g
 
 1. The publisher alone: snapshots of the 64-channel device, one new snapshot object per
    frame, fed as fast as the publisher takes them (at most 2,000 waiting), for JSON and
-   binary at QoS 1 (acknowledged) and QoS 0; frames per second published, and the payload
-   size. This includes building the frame (the static force estimate of every channel) and
-   encoding it, which run in the publisher's thread.
+   binary at QoS 1 (acknowledged) and QoS 0, with the default batching (``max_batch_frames``,
+   ``batch_interval_s``) and, for JSON at QoS 1, without (``max_batch_frames = 1``); frames
+   per second published and frames per message, and the payload size. This includes building
+   the frame (the static force estimate of every channel) and encoding it, which run in the
+   publisher's thread.
 2. The gateway's back-to-back poll rate with MQTT on (every poll published, JSON, QoS 1) as
-   a ratio to MQTT off, in alternating rounds of the same run (goal >= 0.9).
+   a ratio to MQTT off, in alternating rounds of the same run (goal >= 0.9), for the default
+   batching and for each of ``BATCHINGS``; with the frames polled while publishing, handed to
+   the client, acknowledged by the broker and dropped (goal: all acknowledged, none dropped).
 
 Each measurement runs for ``BENCH_SECONDS`` (default 5) seconds.
 """
@@ -37,6 +41,8 @@ from gateway.runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 MEASURE_S = float(os.environ.get("BENCH_SECONDS", "5"))
 ROUNDS = 5
 MAX_WAITING = 2000
+#: (max_batch_frames, batch_interval_s) compared in part 2 besides the default
+BATCHINGS = ((1, 0.0), (50, 0.005), (50, 0.02))
 
 
 def _free_port() -> int:
@@ -66,16 +72,41 @@ def _start_mosquitto(folder: Path) -> tuple[subprocess.Popen[bytes], int]:
     raise RuntimeError("mosquitto did not start (apt-get install mosquitto)")
 
 
-def _with_mqtt(config: GatewayConfig, port: int, encoding: str, qos: int) -> GatewayConfig:
+def _with_mqtt(
+    config: GatewayConfig, port: int, encoding: str, qos: int, batching: tuple[int, float] | None = None
+) -> GatewayConfig:
+    """``batching``: (max_batch_frames, batch_interval_s), None for the defaults."""
     mqtt = MqttConfig(
         "127.0.0.1", port, None, None, None, f"bench-{encoding}-{qos}", "bench", "gw",
         qos=qos, encoding=encoding, protocol="5", queue_frames=1_000_000,
     )  # fmt: skip
+    if batching is not None:
+        mqtt = dataclasses.replace(mqtt, max_batch_frames=batching[0], batch_interval_s=batching[1])
     return dataclasses.replace(config, mqtt=mqtt)
 
 
-def _publisher_rate(config: GatewayConfig, snap: DeviceSnapshot) -> float:
-    """Frames per second published (acknowledged at QoS 1) by a publisher fed without pause."""
+def _batching_text(config: GatewayConfig) -> str:
+    assert config.mqtt is not None
+    m = config.mqtt
+    if m.max_batch_frames == 1:
+        return "max_batch_frames = 1 (no batching)"
+    return f"max_batch_frames = {m.max_batch_frames}, batch_interval_s = {m.batch_interval_s:g}"
+
+
+@dataclasses.dataclass
+class PollRun:
+    off_polls_s: float
+    on_polls_s: float
+    polled: int  # frames handed to the publisher while it was on
+    sent: int  # handed to the MQTT client
+    acknowledged: int  # acknowledged by the broker (QoS 1)
+    dropped: int
+    messages: int  # acknowledged messages
+
+
+def _publisher_rate(config: GatewayConfig, snap: DeviceSnapshot) -> tuple[float, float]:
+    """Frames per second published (acknowledged at QoS 1) by a publisher fed without pause,
+    and frames per message."""
     publisher = MqttPublisher(config)
     publisher.start()
     try:
@@ -97,29 +128,39 @@ def _publisher_rate(config: GatewayConfig, snap: DeviceSnapshot) -> float:
                 publisher.on_snapshot(GatewaySnapshot.build({snap.device: dev}, {}, i))
 
         feed_until(time.monotonic() + min(1.0, MEASURE_S / 5))  # warm-up
-        start_count, t0 = publisher.stats().published.get(snap.device, 0), time.monotonic()
+        s0, t0 = publisher.stats(), time.monotonic()
         feed_until(t0 + MEASURE_S)
-        end_count, t1 = publisher.stats().published.get(snap.device, 0), time.monotonic()
-        if publisher.stats().dropped.get(snap.device, 0):
+        s1, t1 = publisher.stats(), time.monotonic()
+        if s1.dropped.get(snap.device, 0):
             raise RuntimeError("frames were dropped")
-        return (end_count - start_count) / (t1 - t0)
+        frames = s1.published.get(snap.device, 0) - s0.published.get(snap.device, 0)
+        return frames / (t1 - t0), frames / max(1, s1.messages - s0.messages)
     finally:
         publisher.stop()
 
 
-async def _poll_rates(config: GatewayConfig) -> tuple[float, float, int]:
-    """Back-to-back polls per second without and with publishing, alternating rounds."""
+async def _poll_rates(config: GatewayConfig) -> PollRun:
+    """Back-to-back polls per second without and with publishing, alternating rounds; what
+    became of the frames polled while publishing."""
     poller = Poller(config)
     worker = poller.workers[0]
     runner = worker.runners[0]
     publisher = MqttPublisher(config)
     on = False
+    polled = 0
+    last: object = None
 
     def forward(snapshot: GatewaySnapshot) -> None:
+        nonlocal polled, last
         if on:
+            dev = snapshot.devices.get(runner.config.name)
+            if dev is not None and dev is not last and dev.polled:
+                last = dev
+                polled += 1
             publisher.on_snapshot(snapshot)
 
-    poller.holder.subscribe(forward)
+    # as `run` subscribes it: the poll loop derives the JSON body while it waits (only while on)
+    poller.holder.subscribe(forward, derive_now=lambda: publisher.derivations if on else ())
     publisher.start()
     await worker.transport.connect()
     slot = MEASURE_S / ROUNDS
@@ -142,8 +183,15 @@ async def _poll_rates(config: GatewayConfig) -> tuple[float, float, int]:
         await worker.close()
         await asyncio.to_thread(publisher.stop)
     stats = publisher.stats()
-    dropped = sum(stats.dropped.values())
-    return sum(rates[False]) / ROUNDS, sum(rates[True]) / ROUNDS, dropped
+    return PollRun(
+        sum(rates[False]) / ROUNDS,
+        sum(rates[True]) / ROUNDS,
+        polled,
+        sum(stats.sent.values()),
+        sum(stats.published.values()),
+        sum(stats.dropped.values()),
+        stats.messages,
+    )
 
 
 async def bench() -> None:
@@ -168,21 +216,29 @@ async def bench() -> None:
             print(f"MQTT, local mosquitto, {CHANNELS}-channel frames; {cores}")
             frame = frame_dict(snap, 1)
             sizes = {"json": len(encode_json(frame)), "binary": len(encode_binary(frame))}
-            for encoding in ("json", "binary"):
-                for qos in (1, 0):
-                    rate = await asyncio.to_thread(
-                        _publisher_rate, _with_mqtt(base, broker_port, encoding, qos), snap
-                    )
-                    print(
-                        f"  publisher, {encoding:6s} ({sizes[encoding]:5d} bytes), QoS {qos}: "
-                        f"{rate:8.0f} frames/s"
-                    )
-            off, on, dropped = await _poll_rates(_with_mqtt(base, broker_port, "json", 1))
-            print(f"  gateway back-to-back polls, MQTT off: {off:8.1f} polls/s")
-            print(
-                f"  gateway back-to-back polls, MQTT on:  {on:8.1f} polls/s (JSON, QoS 1; {dropped} dropped)"
-            )
-            print(f"  ratio on / off: {on / off:.3f} (goal >= 0.9)")
+            cases = [("json", 1, None), ("json", 1, (1, 0.0)), ("json", 0, None)]
+            cases += [("binary", 1, None), ("binary", 0, None)]
+            for encoding, qos, batching in cases:
+                config = _with_mqtt(base, broker_port, encoding, qos, batching)
+                rate, per_message = await asyncio.to_thread(_publisher_rate, config, snap)
+                print(
+                    f"  publisher, {encoding:6s} ({sizes[encoding]:5d} bytes), QoS {qos}, "
+                    f"{_batching_text(config)}: {rate:8.0f} frames/s, {per_message:5.1f} frames/message"
+                )
+            for batching in (None, *BATCHINGS):
+                config = _with_mqtt(base, broker_port, "json", 1, batching)
+                run = await _poll_rates(config)
+                default = " (the default)" if batching is None else ""
+                print(f"  gateway back-to-back polls, JSON, QoS 1, {_batching_text(config)}{default}:")
+                print(
+                    f"    MQTT off {run.off_polls_s:7.1f} polls/s, on {run.on_polls_s:7.1f} polls/s: "
+                    f"ratio on / off {run.on_polls_s / run.off_polls_s:.3f} (goal >= 0.9)"
+                )
+                print(
+                    f"    frames polled while on {run.polled}, handed to the client {run.sent}, "
+                    f"acknowledged {run.acknowledged}, dropped {run.dropped}; "
+                    f"{run.acknowledged / max(1, run.messages):.1f} frames/message"
+                )
         finally:
             broker.terminate()
             broker.wait(timeout=10)
