@@ -7,9 +7,11 @@ own (``rest_stretch``) for a stretch of at least ``MIN_POLLS`` polls that is
 * at the channel's own extreme: its least loaded level, the highest resistance (the lowest
   conductance) it reached, taken as the best mean of ``MIN_POLLS`` consecutive polls; a poll
   belongs to the plateau there when it is within ``max(floor, 4 sigma)`` of that level (the
-  tare's drift floor: 2 counts, or 0.5 % of the reading in ohm; sigma the channel's noise from
-  its poll-to-poll steps within those ``MIN_POLLS`` polls, robust to a step and blind to the
-  load's jitter elsewhere in the window);
+  tare's drift floor: 2 counts, or 0.5 % of the reading in ohm; sigma the standard deviation
+  of those ``MIN_POLLS`` polls: the channel's noise at rest, blind to the load's jitter
+  elsewhere in the window);
+  A gap of at most ``BRIDGE_POLLS`` polls within two bands of the level (noise, a sigma
+  estimated from few polls) does not end the plateau;
 * still: the tare's MOVING check (first third against last third) passes within the stretch.
   An FSR lifted after a load creeps back to its baseline over seconds to tens of seconds, so a
   stretch that still moves is cut from its start (its first third dropped) until it is still
@@ -57,8 +59,8 @@ __all__ = ["RestSearch", "RestStretch", "WindowTare", "compute_window_tare", "re
 
 #: the plateau band around a channel's extreme, in standard deviations of its noise
 PLATEAU_SIGMAS = 4.0
-#: a median absolute deviation times this is a standard deviation (normal noise)
-_MAD_TO_STD = 1.4826
+#: a gap of at most this many polls within two bands of the extreme does not end a plateau
+BRIDGE_POLLS = 2
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,18 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
+def _bridged(runs: list[tuple[int, int]], near: np.ndarray) -> list[tuple[int, int]]:
+    """``runs`` joined across gaps of at most ``BRIDGE_POLLS`` polls that are all ``near``: a
+    reading a little outside the band in the middle of a rest is noise, not a load."""
+    out: list[tuple[int, int]] = []
+    for start, stop in runs:
+        if out and start - out[-1][1] <= BRIDGE_POLLS and near[out[-1][1] : start].all():
+            out[-1] = (out[-1][0], stop)
+        else:
+            out.append((start, stop))
+    return out
+
+
 def rest_stretch(
     values: FloatArray,
     *,
@@ -133,14 +147,14 @@ def rest_stretch(
     best = int(np.flatnonzero(whole)[np.argmax(np.where(whole, window_sum, -np.inf)[whole])])
     top = _stretch(v, best, best + min_polls)
     level = float(window_sum[best] / min_polls)
-    # the noise from the poll-to-poll steps at the extreme: a moving load elsewhere in the
-    # window makes large steps, which say nothing of the channel at rest
-    steps = np.diff(x[best : best + min_polls])
-    sigma = _MAD_TO_STD * float(np.median(np.abs(steps))) / np.sqrt(2.0)
+    # the noise at the extreme itself: a moving load elsewhere in the window scatters the
+    # readings far more, which says nothing of the channel at rest
+    sigma = top.std
     floor = max(floor_abs, floor_rel * abs(level))
-    plateau = finite & (x >= level - max(floor, PLATEAU_SIGMAS * sigma))
+    band = max(floor, PLATEAU_SIGMAS * sigma)
+    runs = _bridged(_runs(finite & (x >= level - band)), finite & (x >= level - 2.0 * band))
     moving: RestStretch | None = None
-    for start, stop in reversed(_runs(plateau)):
+    for start, stop in reversed(runs):
         while stop - start >= min_polls:
             found = _stretch(v, start, stop)
             if abs(found.drift) <= max(floor, 4.0 * found.drift_err):

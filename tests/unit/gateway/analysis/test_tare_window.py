@@ -241,6 +241,23 @@ def test_rest_stretch_looks_down_when_low_is_unloaded() -> None:
     assert (found.stretch.start, found.stretch.stop) == (0, 10)
 
 
+@pytest.mark.parametrize("seed", range(40))
+def test_a_noisy_rest_is_taken_whole_not_its_upper_half(seed: int) -> None:
+    """Quantized normal noise of 2 counts (the simulator's rawgrid board): 100 polls loaded at
+    3300, then 60 at rest around 3895. The extreme (the best mean of 10 polls) sits about 1 sigma
+    above the rest; a band of 4 sigma below it keeps the rest whole: a stretch of at least 50 of
+    the 60 polls whose mean is within 0.5 counts of the rest's (the standard error of 60 polls
+    is 0.26 counts). A band that cut into the noise would keep its upper half, short and high."""
+    rng = np.random.default_rng(seed)
+    rest = 3895 + np.rint(rng.normal(0.0, 2.0, 60))
+    values = np.concatenate([3300 + np.rint(rng.normal(0.0, 2.0, 100)), rest])
+    found = rest_stretch(values, floor_abs=2.0)
+    assert found.stretch is not None
+    assert found.stretch.stop == 160 and found.stretch.n_polls >= 50, found.stretch
+    assert found.stretch.mean == pytest.approx(rest[found.stretch.start - 100 :].mean(), abs=1e-9)
+    assert abs(found.stretch.mean - rest.mean()) < 0.5
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     level=st.floats(1e3, 1e6),
