@@ -251,8 +251,8 @@ def tare(
     With --moving-load (a load that moves, never off the whole array at once) each channel's
     baseline comes from its own unloaded moments within the window: its latest still stretch
     (at least 10 polls) at its least loaded level, which leaves out the creep back after a
-    lift; the output says when each was taken, and a
-    channel loaded throughout is named, with its numbers, and not zeroed.
+    lift; the output says when each was taken, and a channel loaded throughout is named,
+    with its numbers, and not zeroed (docs/bring-your-own-array.md).
 
     With --device-zero the device zeroes itself (its configured `zero` action) and nothing is
     written to the configuration file.
