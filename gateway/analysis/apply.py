@@ -9,11 +9,10 @@ gateway would have read it live with the calibration in its device configuration
   baselines and line / lookup / curve tables from the calibration exactly as
   ``[[bus.device]] calibration = "..."`` gives them to the live gateway.
 * **The tracker.** ``runtime.replay.replay``: ``runtime.processor.DeviceProcessor.process``,
-  one device sample at a time, the device's clock read from the record's ``time_s`` (so the
-  creep state steps by the record's time step). Rows of equal ``time_s`` across channels are
-  one device sample. A channel without a row at a device sample reads NaN there, which the
-  processor reads as invalid: the held force kept and the state relaxed with it, exact for a
-  constant held force, so the channel's state at its next row is the one it would have had
+  each channel at its own rows, its creep state stepped by its recorded time step (the
+  record's ``time_s``). Rows of equal ``time_s`` across channels are one device sample (the
+  count reported). A channel's state does not move between its rows but by relaxing with its
+  held force, exact for a constant held force, so each channel reads what it would read
   sampled alone (``runtime.replay`` says why). ``inf`` (no current) reads no contact, 0 N, as
   the gateway reads a rail of a device with fault bitmaps; a record cannot tell a broken lead
   from a contact open at rest.

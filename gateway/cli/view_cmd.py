@@ -1,9 +1,11 @@
 """``tactile-gateway view RECORD``: a recorded file played back on the live page.
 
 The record (``docs/record-format.md``, read by ``analysis.records.read_record``) is replayed
-through the runtime's processor (``runtime.replay``, as ``apply`` does), one device sample
-per recorded time, and the snapshots are handed to the web layer's ``PlaybackPage``, which
-serves the live page in playback mode. Where the channels sit and how a resistance reads as a
+through the runtime's processor (``runtime.replay``, as ``apply`` does: each channel at its own
+samples), one device sample per recorded time, each channel showing its last reading
+(``runtime.replay.held_snapshots``); the snapshots of the device samples the page gets
+(``playback.thin``) are handed to the web layer's ``PlaybackPage``, which serves the live page
+in playback mode. Where the channels sit and how a resistance reads as a
 force come from, in this order:
 
 1. ``--config CONFIG``: the device of that configuration (``--device NAME``, or its only one);
@@ -40,9 +42,9 @@ from ..errors import ConfigError, RecordError
 from ..metrics.server import MetricsServer
 from ..model import PAPER_EFFECTS, Divider, SensorParams
 from ..runtime.processor import DeviceProcessor
-from ..runtime.replay import ChannelSeries, ReplayError, replay
+from ..runtime.replay import ChannelSeries, ReplayError, held_snapshots
 from ..runtime.snapshot import DeviceSnapshot
-from ..web.playback import Playback, PlaybackPage, playback_frames
+from ..web.playback import Playback, PlaybackPage, playback_frames, thin
 
 EXIT_BAD_INPUT = 2
 #: The fallback layout's pitch when the record does not give one (mm).
@@ -138,9 +140,11 @@ def _match(record: Record, device: DeviceConfig) -> list[str | None]:
     return chosen
 
 
-def record_snapshots(record: Record, device: DeviceConfig) -> tuple[list[DeviceSnapshot], bool]:
-    """``record`` replayed through ``device``'s processor: one snapshot per device sample (in
-    time order), and whether the record has a reference force for the channels it reads."""
+def record_snapshots(record: Record, device: DeviceConfig) -> tuple[list[DeviceSnapshot], bool, int]:
+    """``record`` replayed through ``device``'s processor: the snapshots of the device samples
+    the page gets (``playback.thin``: every one up to ``MAX_FRAMES``; in time order, each
+    channel showing its last reading, ``runtime.replay.held_snapshots``), whether the record
+    has a reference force for the channels it reads, and the number of device samples."""
     chosen = _match(record, device)
     empty = np.zeros(0, dtype=np.float64)
     read = [record.channels[n] for n in chosen if n is not None]
@@ -156,12 +160,11 @@ def record_snapshots(record: Record, device: DeviceConfig) -> tuple[list[DeviceS
         series.append(ChannelSeries(c.time_s, c.resistance_ohm, c.force_n if has_reference else None,
                                     c.temperature_c if has_temperature else None))  # fmt: skip
     processor = DeviceProcessor(device, bus="record", poll_interval_s=_interval_s(read))
-    snapshots: list[DeviceSnapshot] = []
     try:
-        replay(processor, series, snapshots.append)
+        snapshots, n_samples = held_snapshots(processor, series, thin)
     except ReplayError as exc:
         raise ViewError(f"{record.path}: {exc}") from None
-    return snapshots, has_reference
+    return snapshots, has_reference, n_samples
 
 
 def _interval_s(channels: list[ChannelRecord]) -> float:
@@ -196,13 +199,13 @@ def load_playback(
                 f"on a grid of {dev.layout.columns} columns at {dev.layout.pitch_x_mm:g} mm, forces from "
                 "the default sensor parameters"
             )
-    snapshots, has_reference = record_snapshots(record, dev)
+    snapshots, has_reference, n_samples = record_snapshots(record, dev)
     if not snapshots:
         raise ViewError(f"{record_path}: no sample of device {dev.name!r} to show")
     try:
         playback = playback_frames(
             snapshots, has_reference=has_reference, scale_max_n=SCALE_MAX_N, config=dev,
-            source=str(record_path),
+            source=str(record_path), samples_total=n_samples,
         )  # fmt: skip
     except ValueError as exc:
         raise ViewError(f"{record_path}: {exc}") from None

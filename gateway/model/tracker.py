@@ -152,14 +152,14 @@ class CurveSet:
             return np.asarray(np.where(np.isnan(g), np.nan, np.where(g == 0.0, 0.0, x + self.offset)))
 
     def track(
-        self, resistance_ohm: FloatArray, state: CurveState, dt_s: float
+        self, resistance_ohm: FloatArray, state: CurveState, dt_s: float | FloatArray
     ) -> tuple[FloatArray, StatusArray, FloatArray, BoolArray, CurveState]:
         """One sample per channel: force (N), ``ForceStatus``, static force x (N), the
         extrapolated flag (outside the calibrated range) and the new state."""
         return self.track_apparent(self.static_force(resistance_ohm), state, dt_s)
 
     def track_apparent(
-        self, x: FloatArray, state: CurveState, dt_s: float
+        self, x: FloatArray, state: CurveState, dt_s: float | FloatArray
     ) -> tuple[FloatArray, StatusArray, FloatArray, BoolArray, CurveState]:
         """``track`` from the apparent force x (N) itself: a device that calibrates its own
         static curve reports x, and only the dynamics are corrected here."""
@@ -180,7 +180,10 @@ class CurveSet:
                 u = np.where(fresh, self.cs * x_held, u)
                 play = np.where(fresh[:, None], np.where(fresh, x, 0.0)[:, None], play)
                 held = np.where(fresh, f0, held)
-            dt = max(float(dt_s), 0.0) if math.isfinite(dt_s) else 0.0
+            if isinstance(dt_s, np.ndarray):  # a step per channel (a replay: ``runtime.replay``)
+                dt: float | FloatArray = np.where(np.isfinite(dt_s), np.maximum(dt_s, 0.0), 0.0)
+            else:
+                dt = max(float(dt_s), 0.0) if math.isfinite(dt_s) else 0.0
             t1, t2 = self.a1 * held, self.a2 * held
             # loading: the held force above the element's own unit response z / a
             e1 = np.exp(-dt / np.where((t1 - z1) * self.sign1 > 0.0, self.tau1, self.rec1))

@@ -44,7 +44,7 @@ class Step:
 
     resistance_ohm: FloatArray
     temperature_c: FloatArray | None
-    dt_s: float
+    dt_s: float | FloatArray  # one step for the device, or one per enabled channel
     model_state: ModelState
     curve_state: CurveState | None
     force_n: FloatArray
@@ -90,8 +90,9 @@ class PhysicsConverter:
             if self.every:
                 inv, new = self.model.track(step.resistance_ohm, ms, step.dt_s, temp)
             else:
+                dt = step.dt_s[idx] if isinstance(step.dt_s, np.ndarray) else step.dt_s
                 inv, new = self.model.track(
-                    step.resistance_ohm[idx], ms.select(idx), step.dt_s, None if temp is None else temp[idx]
+                    step.resistance_ohm[idx], ms.select(idx), dt, None if temp is None else temp[idx]
                 )
         step.force_n[idx] = inv.force_n
         step.status[idx] = inv.status
@@ -122,13 +123,14 @@ class CurveConverter:
     def track(self, step: Step) -> None:
         pos = self.positions
         state = step.curve_state or self.curves.initial_state()
+        dt = step.dt_s[pos] if isinstance(step.dt_s, np.ndarray) else step.dt_s
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             if self.from_output:
                 assert step.apparent_n is not None
                 x_in = step.apparent_n[pos]
-                f, st, x, extrapolated, new = self.curves.track_apparent(x_in, state, step.dt_s)
+                f, st, x, extrapolated, new = self.curves.track_apparent(x_in, state, dt)
             else:
-                f, st, x, extrapolated, new = self.curves.track(step.resistance_ohm[pos], state, step.dt_s)
+                f, st, x, extrapolated, new = self.curves.track(step.resistance_ohm[pos], state, dt)
         step.force_n[pos] = f
         step.status[pos] = np.where(extrapolated, _EXTRAPOLATED, st)
         # the static estimate reads no contact by the channel's own rule, as the force does

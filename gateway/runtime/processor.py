@@ -350,26 +350,42 @@ class DeviceProcessor:
         )
 
     def process(
-        self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
+        self,
+        state: DeviceState,
+        raw: RawSample,
+        wall_time_s: float,
+        host_time_s: float,
+        step_s: FloatArray | None = None,
     ) -> tuple[DeviceSnapshot, DeviceState]:
         """Convert one good poll. ``host_time_s`` is a monotonic clock, ``wall_time_s`` Unix time.
 
         The same as ``finish(track(...))``; the two steps exist so that a caller can run
         them at different moments (the poller runs each while a device answers).
         """
-        return self.finish(self.track(state, raw, wall_time_s, host_time_s))
+        return self.finish(self.track(state, raw, wall_time_s, host_time_s, step_s))
 
     def track(
-        self, state: DeviceState, raw: RawSample, wall_time_s: float, host_time_s: float
+        self,
+        state: DeviceState,
+        raw: RawSample,
+        wall_time_s: float,
+        host_time_s: float,
+        step_s: FloatArray | None = None,
     ) -> TrackedSample:
         """First step of ``process``: resistances and drift-corrected forces.
 
         The rails are read once, here, before any converter: without fault bitmaps a rail is
         the channel's base status (open, short); with them the open rail is no current at rest
         (+inf ohm: no contact) and the short rail less resistance than the converter resolves,
-        which reads saturated at the channel's top, without a sample for its state."""
+        which reads saturated at the channel's top, without a sample for its state.
+
+        ``step_s`` (s, one per enabled channel) replaces the clock's step for each channel: a
+        replay of channels sampled at their own times (``runtime.replay``); the poller gives none."""
         n = len(self.channels)
+        dt: float | FloatArray
         dt, now, use_device, clock_health = self._dt(state, raw, host_time_s)
+        if step_s is not None:
+            dt = step_s
         temperature = None if raw.temperature_c is None else raw.temperature_c[self._pick]
         apparent = None
         if self.output:

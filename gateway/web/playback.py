@@ -2,11 +2,12 @@
 
 The web layer does not read records (that is analysis): the command replays the record
 through the runtime's processor and hands the resulting ``DeviceSnapshot``s here, one per
-device sample in time order. ``playback_frames`` encodes them as the live page's frames
-(``frames.frame_json`` of each snapshot's ``Frame``, the same shape, so ``app.js`` draws
-them with the same code), each with one more member, ``reference_total_force_n``: the sum
-of the record's reference forces at that sample (N; ``null`` when the record has no
-``force_n`` column).
+device sample in time order (or those ``thin`` keeps of them, with the record's count).
+``playback_frames`` encodes them as the live page's frames (``page_frames``: the values of
+``frames.frame_json`` of each snapshot, the same shape, so ``app.js`` draws them with the same
+code, rounded over all frames at once), each with one more member,
+``reference_total_force_n``: the sum of the record's reference forces at that sample (N;
+``null`` when the record has no ``force_n`` column).
 
 ``PlaybackPage(playback).install(app)`` serves:
 
@@ -28,12 +29,14 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 from aiohttp import web
 
-from ..runtime.frame import DECIMALS
+from ..runtime.counters import DeviceCounters
+from ..runtime.frame import DECIMALS, compact_json
 from ..runtime.snapshot import DeviceSnapshot, finite_or_none
 from .app import PageFiles
-from .frames import DeviceDescription, PageFrame, frame_json, layout_json
+from .frames import DeviceDescription, PageFrame, layout_json
 
 #: The most frames a playback sends to the page (about 12 MB of JSON for 16 channels).
 MAX_FRAMES = 20_000
@@ -77,6 +80,48 @@ def reference_total_n(snap: DeviceSnapshot) -> float | None:
     return math.fsum(values) if values else None
 
 
+def page_frames(snapshots: Sequence[DeviceSnapshot], *, has_reference: bool) -> list[PlaybackFrame]:
+    """The page's frames of ``snapshots`` (one device: the same channels), numbered from 1:
+    ``frame_json`` of each (no counters) with its reference total, equal value for value,
+    each per-channel quantity rounded once over all the snapshots (a record has up to
+    ``MAX_FRAMES`` of them: one by one, the frames would cost several times the replay)."""
+    if not snapshots:
+        return []
+    n = snapshots[0].n_channels
+    flat = finite_or_none(np.stack([s.force_n for s in snapshots]).astype(np.float64), DECIMALS)
+    statuses = np.stack([s.status for s in snapshots]).astype(np.int64).tolist()
+    counters = DeviceCounters()
+    read_errors = sum(counters.read_errors_total.values())
+    out: list[PlaybackFrame] = []
+    for seq, (snap, status) in enumerate(zip(snapshots, statuses, strict=True), start=1):
+        cop = snap.center_of_pressure_mm
+        lo = (seq - 1) * n
+        reference = finite_or_none(reference_total_n(snap), DECIMALS) if has_reference else None
+        out.append({
+            "device": snap.device,
+            "seq": seq,
+            "t": round(float(snap.timestamp_s), DECIMALS),
+            "device_time_s": finite_or_none(snap.device_time_s, DECIMALS),
+            "last_success_t": finite_or_none(snap.last_success_timestamp_s, DECIMALS),
+            "up": bool(snap.up),
+            "error": snap.error,
+            "force_n": flat[lo : lo + n],
+            "status": status,
+            "total_force_n": round(float(snap.total_force_n), DECIMALS),
+            "cop_mm": None if cop is None else [round(float(c), DECIMALS) for c in cop],
+            "contact_area_mm2": round(float(snap.contact_area_mm2), DECIMALS),
+            "channels_in_contact": int(snap.channels_in_contact),
+            "peak_channel": snap.peak_channel,
+            "peak_force_n": finite_or_none(snap.peak_force_n, DECIMALS),
+            "poll_interval_s": round(float(snap.poll_interval_s), DECIMALS),
+            "polls_total": counters.polls_total,
+            "reads_total": counters.reads_total,
+            "read_errors_total": read_errors,
+            "reference_total_force_n": reference,
+        })  # fmt: skip
+    return out
+
+
 def playback_frames(
     snapshots: Sequence[DeviceSnapshot],
     *,
@@ -85,22 +130,24 @@ def playback_frames(
     config: DeviceDescription | None = None,
     source: str = "",
     max_frames: int = MAX_FRAMES,
+    samples_total: int | None = None,
 ) -> Playback:
-    """The frames of ``snapshots`` (one device, time order) for the page. ``ValueError`` for
-    no snapshot at all (an empty record has nothing to show)."""
+    """The frames of ``snapshots`` (one device, time order) for the page. ``samples_total``:
+    the record's device samples when ``snapshots`` are already those ``thin`` keeps of them
+    (default: ``len(snapshots)``). ``ValueError`` for no snapshot at all (an empty record has
+    nothing to show)."""
     if not snapshots:
         raise ValueError("no device sample to play back")
     names = {s.device for s in snapshots}
     if len(names) != 1:
         raise ValueError(f"one device per playback, got {sorted(names)}")
-    frames: list[PlaybackFrame] = []
-    for seq, k in enumerate(thin(len(snapshots), max_frames), start=1):
-        snap = snapshots[k]
-        reference = finite_or_none(reference_total_n(snap), DECIMALS) if has_reference else None
-        frames.append({**frame_json(snap, seq, None), "reference_total_force_n": reference})
+    frames = page_frames(
+        [snapshots[k] for k in thin(len(snapshots), max_frames)], has_reference=has_reference
+    )
     first, last = snapshots[0].timestamp_s, snapshots[-1].timestamp_s
     layout = layout_json(snapshots[0], scale_max_n, config)
-    return Playback(layout, frames, float(first), float(last), has_reference, source, len(snapshots))
+    total = len(snapshots) if samples_total is None else samples_total
+    return Playback(layout, frames, float(first), float(last), has_reference, source, total)
 
 
 def _json(data: Any) -> web.Response:
@@ -127,7 +174,7 @@ class PlaybackPage:
         entry.update(up=True, seq=len(p.frames), stream_frames_dropped_total=0, playback=True)
         self._entry = entry
         body = {**self._summary, "device": p.layout["name"], "frames": p.frames}
-        self._frames_body = json.dumps(body, separators=(",", ":"), allow_nan=False).encode()
+        self._frames_body = compact_json(body)  # frames hold None, never NaN
         self.files = PageFiles()
 
     def install(self, app: web.Application) -> None:

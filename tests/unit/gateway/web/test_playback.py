@@ -58,7 +58,7 @@ def write(tmp_path: Path, with_reference: bool = True) -> Path:
 
 def test_frames_carry_the_recorded_forces_and_hand_computed_totals(tmp_path: Path) -> None:
     record = read_record(write(tmp_path))
-    snaps, has_ref = record_snapshots(record, line_device())
+    snaps, has_ref, _ = record_snapshots(record, line_device())
     assert has_ref and len(snaps) == 3
     pb = playback_frames(snaps, has_reference=True, source="rec.csv")
     assert (pb.start_s, pb.end_s) == (0.0, 1.0)
@@ -81,7 +81,7 @@ def test_frames_carry_the_recorded_forces_and_hand_computed_totals(tmp_path: Pat
 
 
 def test_without_a_reference_column_the_reference_is_null(tmp_path: Path) -> None:
-    snaps, has_ref = record_snapshots(read_record(write(tmp_path, with_reference=False)), line_device())
+    snaps, has_ref, _ = record_snapshots(read_record(write(tmp_path, with_reference=False)), line_device())
     pb = playback_frames(snaps, has_reference=has_ref)
     assert not has_ref and all(f["reference_total_force_n"] is None for f in pb.frames)
 
@@ -99,7 +99,7 @@ def test_thinning_keeps_the_end_and_the_bound() -> None:
 
 
 async def test_the_page_and_api_are_served(tmp_path: Path) -> None:
-    snaps, has_ref = record_snapshots(read_record(write(tmp_path)), line_device())
+    snaps, has_ref, _ = record_snapshots(read_record(write(tmp_path)), line_device())
     page = PlaybackPage(playback_frames(snaps, has_reference=has_ref, source="rec.csv"))
     app = web.Application()
     page.install(app)
