@@ -16,10 +16,12 @@ import threading
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TextIO
+from typing import BinaryIO, TextIO, cast
 
+from ..atomic import AtomicFile
 from ..config import GatewayConfig
 from ..runtime.snapshot import VALUED_STATUSES, ChannelStatus, GatewaySnapshot
+from .mcap_records import McapRecordWriter, is_mcap_record
 from .records import REQUIRED_COLUMNS, RecordWriter
 
 #: the statuses whose row keeps its value: ok, no_contact, saturated, extrapolated, no_zero
@@ -36,15 +38,20 @@ class RecorderStats:
 
 
 class LiveRecorder:
-    """Turns published snapshots into record rows (thread-safe; bus threads may publish)."""
+    """Turns published snapshots into record rows (thread-safe; bus threads may publish).
+
+    ``record_format`` ``csv`` writes text to ``out``; ``mcap`` (``mcap_records``) writes to
+    ``out`` as an ``AtomicFile`` or a binary stream, one message per poll of a device, and
+    needs ``close`` before the file is committed."""
 
     def __init__(
         self,
-        out: TextIO,
+        out: TextIO | AtomicFile | BinaryIO,
         config: GatewayConfig,
         channels: Collection[str] | None = None,
         metadata: Mapping[str, str] | None = None,
         device: str | None = None,
+        record_format: str = "csv",
     ) -> None:
         self.out = out
         self._device = device
@@ -60,8 +67,19 @@ class LiveRecorder:
         self._last: dict[str, float] = {}
         self._t0: dict[str, float] = {}
         self._errors: dict[str, int] = {}
-        self._writer = RecordWriter(out, metadata, has_force=self._has_force, has_temperature=self._has_temp)
+        force, temp = self._has_force, self._has_temp
+        self._writer: RecordWriter | McapRecordWriter
+        if record_format == "mcap":
+            binary = cast(AtomicFile | BinaryIO, out)
+            self._writer = McapRecordWriter(binary, metadata, has_force=force, has_temperature=temp)
+        else:
+            self._writer = RecordWriter(cast(TextIO, out), metadata, has_force=force, has_temperature=temp)
         self._writer.flush()
+
+    def close(self) -> None:
+        """The last rows to the file (an MCAP record's summary and index too)."""
+        with self._lock:
+            self._writer.close()
 
     def label(self, device: str, channel: str) -> str:
         return f"{device}/{channel}" if self._multi else channel
@@ -124,14 +142,18 @@ _HEAD_BYTES = 64 * 1024
 
 def is_record_file(path: Path) -> bool:
     """True if ``path`` is a regular file in the record format: ``#`` metadata lines (or
-    none), then a header row naming ``time_s`` and ``resistance_ohm``. Reads its first 64 kB."""
+    none), then a header row naming ``time_s`` and ``resistance_ohm``; or an MCAP record this
+    project wrote. Reads its first 64 kB."""
     try:
         if not path.is_file():
             return False
         with path.open("rb") as fh:
-            head = fh.read(_HEAD_BYTES).decode("utf-8-sig", errors="replace")
+            raw = fh.read(_HEAD_BYTES)
     except OSError:
         return False
+    if is_mcap_record(raw):
+        return True
+    head = raw.decode("utf-8-sig", errors="replace")
     lines = head.splitlines()
     if len(head) == _HEAD_BYTES and lines:
         lines.pop()  # maybe cut short
@@ -157,8 +179,9 @@ def record_path_ok(path: Path, force: bool = False, replace_record: bool = False
             raise ValueError(f"{path} exists; refusing to overwrite it (use --force to replace it)")
         if not is_record_file(path):
             raise ValueError(
-                f"{path} exists and is not a record (no time_s,resistance_ohm header; it could be your "
-                "configuration or other data); refusing to replace it: choose another file, or --force"
+                f"{path} exists and is not a record (no time_s,resistance_ohm header, not an MCAP record; "
+                "it could be your configuration or other data); refusing to replace it: choose another "
+                "file, or --force"
             )
     if not os.access(path.parent, os.W_OK):
         raise ValueError(f"directory {path.parent} is not writable")

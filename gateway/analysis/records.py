@@ -33,8 +33,15 @@ from typing import TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from ..atomic import atomic_write_text
+from ..atomic import AtomicFile, atomic_write_text
 from ..errors import RecordError
+from .mcap_records import MCAP_MAGIC, McapRecordWriter, read_mcap_columns
+from .record_common import NAME_CHARS_SHOWN as NAME_CHARS_SHOWN
+from .record_common import NAMES_SHOWN as NAMES_SHOWN
+from .record_common import RECORD_FORMATS as RECORD_FORMATS
+from .record_common import channel_name_problem as channel_name_problem
+from .record_common import names_text as names_text
+from .record_common import record_format_for as record_format_for
 
 FloatArray = NDArray[np.float64]
 
@@ -56,7 +63,7 @@ class ChannelRecord:
     resistance_ohm: FloatArray
     force_n: FloatArray | None
     temperature_c: FloatArray | None
-    line: NDArray[np.int64]  # the source line of every sample, for messages
+    line: NDArray[np.int64]  # the source line of every sample (MCAP: its message number), for messages
     #: rows whose reference force was below 0 N within the zero-noise tolerance, read as 0 N
     zero_noise_rows: int = 0
     #: the lowest such reference force as written (N, <= 0; 0 when there is none)
@@ -148,26 +155,6 @@ def zero_noise_tolerance_n(full_scale_n: float) -> float:
 #: the gateway's largest (256 channels). Each channel costs its arrays and bookkeeping (about
 #: 2 kB when it has one row), so a record of a million one-row channels is not read into GBs.
 MAX_RECORD_CHANNELS = 4096
-#: How many names a message lists (``names_text``), and how much of each name it shows.
-NAMES_SHOWN = 8
-NAME_CHARS_SHOWN = 32
-
-
-def names_text(names: Iterable[str], shown: int = NAMES_SHOWN) -> str:
-    """Channel names for a message: the first ``shown``, each cut to ``NAME_CHARS_SHOWN``
-    characters, then how many more there are ("none" for no names). A message that names a
-    record's channels stays a line however many (and however long) they are."""
-    listed: list[str] = []
-    more = 0
-    for name in names:
-        if len(listed) < shown:
-            cut = NAME_CHARS_SHOWN - 3
-            listed.append(name if len(name) <= NAME_CHARS_SHOWN else f"{name[:cut]}...")
-        else:
-            more += 1
-    if not listed:
-        return "none"
-    return ", ".join(listed) + (f" and {more} more" if more else "")
 
 
 def _check_channel_count(n_channels: int, channel: str, where: str, line_no: int) -> None:
@@ -227,12 +214,29 @@ def read_record(
         raise RecordError(f"{p}: is a directory; a record is a file") from None
     except OSError as exc:
         raise RecordError(f"{p}: cannot read ({exc.strerror})") from None
+    if data.startswith(MCAP_MAGIC):
+        return _mcap_record(data, p, require_force, limit)
+    if p.suffix.lower() == ".mcap":
+        raise RecordError(f"{p}: not an MCAP file (it does not start with the MCAP magic bytes)")
     try:
         text = data.decode("utf-8-sig")  # a spreadsheet's byte order mark is not a column
     except UnicodeDecodeError as exc:
         raise RecordError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     del data
     return parse_record(text, p, require_force=require_force)
+
+
+def _mcap_record(data: bytearray, path: Path, require_force: bool, limit: int) -> Record:
+    """A record in MCAP (``mcap_records``): the same ``Record`` as its CSV form gives, with the
+    message number where a CSV record has its line."""
+    cols = read_mcap_columns(data, str(path), max_channels=MAX_RECORD_CHANNELS, max_bytes=limit)
+    if require_force and not cols.has_force:
+        raise RecordError(f"{path}: the record has no force_n (reference force); fitting needs one")
+    channels = {
+        name: ChannelRecord(name, c.time_s, c.resistance_ohm, c.force_n, c.temperature_c, c.message)
+        for name, c in cols.channels.items()
+    }
+    return Record(path=path, metadata=cols.metadata, channels=_zero_noise(channels, str(path), None))
 
 
 def parse_record(text: str, path: Path | None = None, require_force: bool = False) -> Record:
@@ -369,9 +373,11 @@ def _parse_record(text: str, path: Path | None, where: str, require_force: bool)
     return Record(path=path, metadata=metadata, channels=channels, extra_columns=extra)
 
 
-def _zero_noise(channels: dict[str, ChannelRecord], where: str, col: int) -> dict[str, ChannelRecord]:
+def _zero_noise(channels: dict[str, ChannelRecord], where: str, col: int | None) -> dict[str, ChannelRecord]:
     """The channels with every reference force below 0 N within the record's zero-noise
-    tolerance read as 0 N and counted; the first one below it (in file order) is refused."""
+    tolerance read as 0 N and counted; the first one below it (in file order) is refused.
+    ``col``: the force_n column of a CSV record; None for an MCAP record (``line`` holds
+    message numbers)."""
     forces = {name: ch.force_n for name, ch in channels.items() if ch.force_n is not None}
     if not forces:
         return channels
@@ -384,8 +390,13 @@ def _zero_noise(channels: dict[str, ChannelRecord], where: str, col: int) -> dic
         if bad.size and (worst is None or line < worst[0]):
             worst = (line, float(f[bad[0]]))
     if worst is not None:
+        at = (
+            f"{where}:{worst[0]}: column {col} (force_n)"
+            if col is not None
+            else f"{where}: message {worst[0]}: force_n"
+        )
         raise RecordError(
-            f"{where}:{worst[0]}: column {col} (force_n): {worst[1]!r} is below 0 N by more than the "
+            f"{at}: {worst[1]!r} is below 0 N by more than the "
             f"load-cell zero-noise tolerance of {tol:.4g} N (the larger of {ZERO_NOISE_FLOOR_N:g} N and "
             f"{100 * ZERO_NOISE_SHARE:g} % of the record's largest reference force, {full_scale:.4g} N); "
             "a reference force must be >= 0"
@@ -494,6 +505,27 @@ class RecordWriter:
     def flush(self) -> None:
         self.out.flush()
 
+    def close(self) -> None:
+        """The last rows to the file (the file itself stays open: its owner commits it)."""
+        self.out.flush()
+
+
+def open_record_writer(
+    out: AtomicFile,
+    record_format: str,
+    metadata: Mapping[str, str] | None = None,
+    *,
+    has_force: bool = False,
+    has_temperature: bool = False,
+) -> RecordWriter | McapRecordWriter:
+    """The record writer of ``record_format`` (``RECORD_FORMATS``) into ``out``: both have
+    ``row``, ``flush`` and ``close``; call ``close`` before ``out.commit()``."""
+    if record_format == "mcap":
+        return McapRecordWriter(out, metadata, has_force=has_force, has_temperature=has_temperature)
+    if record_format != "csv":
+        raise ValueError(f"record format {record_format!r}: one of {', '.join(RECORD_FORMATS)}")
+    return RecordWriter(out.text, metadata, has_force=has_force, has_temperature=has_temperature)
+
 
 def format_record(
     metadata: Mapping[str, str],
@@ -529,23 +561,6 @@ def _fmt(value: float) -> str:
     if math.isinf(v):
         return "inf" if v > 0 else "-inf"
     return repr(v)
-
-
-def channel_name_problem(name: str) -> str | None:
-    """Why ``name`` cannot stand as a channel in a record and read back as itself, or None.
-    The writer does not quote: a comma, a quote or a line break would split or end the row
-    (and could forge rows), white space at either end is stripped by the reader, and a
-    character that is not printable (a control, a format or a separator character, a lone
-    surrogate) is not text a record holds."""
-    if not name:
-        return "empty"
-    if "," in name or '"' in name:
-        return "a comma or a quote in it"
-    if not name.isprintable():
-        return "a line break, control or other non-printable character in it"
-    if name != name.strip():
-        return "white space at its start or end"
-    return None
 
 
 def _plain_label(text: str) -> bool:

@@ -18,6 +18,7 @@ from typing import Any
 
 import click
 
+from ..analysis.record_common import RECORD_FORMATS, record_format_for
 from ..analysis.recorder import LiveRecorder, RecorderStats, record_path_ok
 from ..atomic import AtomicFile
 from ..config import GatewayConfig, RegisterMap, load_config
@@ -52,6 +53,7 @@ async def record_live(
     until: Callable[[], bool] | None = None,
     keep_existing_if_empty: bool = False,
     cancel: asyncio.Event | None = None,
+    record_format: str = "csv",
 ) -> RecorderStats:
     """Poll with ``config`` for ``duration_s`` seconds, or until ``until()`` holds (checked
     every 50 ms), and write a record to ``out_path``: into a temporary file beside it, renamed
@@ -59,7 +61,8 @@ async def record_live(
     file that looks like a complete record. With ``keep_existing_if_empty`` (``out_path``
     exists) a recording without a sample leaves ``out_path`` as it was. With ``cancel`` the
     caller handles SIGINT/SIGTERM: once ``cancel`` is set the recording ends and writes nothing
-    (``out_path`` is left as it was)."""
+    (``out_path`` is left as it was). ``record_format``: ``csv`` or ``mcap``
+    (``docs/record-format.md``)."""
     logging.getLogger("pymodbus").setLevel(logging.CRITICAL)  # its errors reach us as read errors
     stop = asyncio.Event() if cancel is None else cancel
     loop = asyncio.get_running_loop()
@@ -75,7 +78,8 @@ async def record_live(
                 "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
                 **(metadata or {}),
             }
-            recorder = LiveRecorder(out.text, config, channels, meta, device=device)
+            sink = out if record_format == "mcap" else out.text
+            recorder = LiveRecorder(sink, config, channels, meta, device=device, record_format=record_format)
             holder = SnapshotHolder()
             holder.subscribe(recorder)
             t0 = time.monotonic()
@@ -93,6 +97,7 @@ async def record_live(
                 _progress(min(time.monotonic() - t0, duration_s), duration_s, recorder.stats, final=True)
             empty = keep_existing_if_empty and recorder.stats.rows == 0
             if not empty and not (cancel is not None and cancel.is_set()):
+                recorder.close()  # the last rows (an MCAP record's summary and index)
                 out.commit()  # otherwise leaving the block removes the temporary file
         return recorder.stats
     finally:
@@ -103,15 +108,33 @@ async def record_live(
 @click.command("record")
 @config_option
 @click.option("--duration", "duration_s", required=True, type=click.FloatRange(min=0.0), help="seconds")
-@click.option("--out", "out_path", required=True, type=click.Path(path_type=Path), help="record CSV to write")
+@click.option(
+    "--out", "out_path", required=True, type=click.Path(path_type=Path), help="record to write (CSV or .mcap)"
+)
+@click.option(
+    "--format",
+    "record_format",
+    type=click.Choice(RECORD_FORMATS),
+    default=None,
+    help="csv or mcap (default: mcap when --out ends in .mcap, else csv)",
+)
 @click.option("--channels", default=None, help="comma-separated channel names (default: all)")
 @click.option(
     "--force", "overwrite", is_flag=True, help="replace --out even if it is not a record (e.g. another CSV)"
 )
 def record(
-    config_path: Path, duration_s: float, out_path: Path, channels: str | None, overwrite: bool
+    config_path: Path,
+    duration_s: float,
+    out_path: Path,
+    record_format: str | None,
+    channels: str | None,
+    overwrite: bool,
 ) -> None:
     """Write a measurement record from live polls (reference force and temperature where available).
+
+    ``--format mcap`` writes MCAP (one ROS 2 message per poll of a device) that Foxglove and
+    ROS 2 tooling open, and that ``apply``, ``view``, ``calibrate`` and ``discrepancy`` read as
+    they read CSV (``docs/record-format.md``).
 
     ``--out`` replaces an earlier record (as ``calibrate --out`` replaces an earlier
     calibration file), but never another kind of file unless ``--force``; a recording that
@@ -138,6 +161,7 @@ def record(
             names,
             metadata={"config": str(config_path)},
             keep_existing_if_empty=existed,
+            record_format=record_format_for(out_path, record_format),
         )
     )
     kept = stats.rows == 0 and existed

@@ -27,7 +27,7 @@ from types import FrameType
 import click
 
 from ..analysis.recorder import record_path_ok
-from ..analysis.records import RecordWriter, channel_name_problem
+from ..analysis.records import channel_name_problem, open_record_writer, record_format_for
 from ..atomic import AtomicFile
 from ..errors import ConfigError
 from ..mqtt.subscribe_settings import SESSION_EXPIRY_S
@@ -69,7 +69,7 @@ class _Recorder:
     def __init__(self, path: Path, label_gateway: bool, label_device: bool, meta: dict[str, str]) -> None:
         self.path = path
         self.file = AtomicFile(path)
-        self.writer = RecordWriter(self.file.text, meta)
+        self.writer = open_record_writer(self.file, record_format_for(path), meta)  # x.mcap: MCAP
         self.label_gateway, self.label_device = label_gateway, label_device
         self.t0: dict[tuple[str, str], float] = {}
         self.last: dict[tuple[str, str], float] = {}
@@ -117,6 +117,7 @@ class _Recorder:
     def close(self, keep: bool) -> None:
         """Put the record in place (``keep``) or leave the target as it was."""
         if keep:
+            self.writer.close()
             self.file.commit()
         else:
             self.file.discard()
@@ -159,7 +160,10 @@ def _fail(message: str) -> None:
     help="receive frames through $share/GROUP/... (consumers split them)",
 )
 @click.option(
-    "--out", "out_path", type=click.Path(path_type=Path, dir_okay=False), help="record CSV to write"
+    "--out",
+    "out_path",
+    type=click.Path(path_type=Path, dir_okay=False),
+    help="record to write (CSV; MCAP when it ends in .mcap)",
 )
 @click.option("--count", type=click.IntRange(min=1), default=None, help="stop after this many frames")
 @click.option(
