@@ -27,7 +27,16 @@ at a time):
 3. **gateway, skin60-counts**: the same with the raw-counts profile (our physical model of
    each sensor with creep, through the profile's assumed divider), against a bare loop with
    the device in counts mode.
-4. (diagnostic) the gateway's transport alone reading 0x42 back to back (no conversion, no
+4. **MQTT at 2,000 frames/s**: a real snapshot of the 60-point skin (``skin60-mn``, from
+   line 2) published ``PACED_FPS`` times a second for ``BENCH_SECONDS`` (each a new
+   snapshot object whose published ``Frame`` and JSON body the feeding thread derives first,
+   as the poll loop does: about 0.4 ms of CPU a frame, so the publisher gets what a poll loop
+   at that rate leaves of the core), to the
+   same broker with the default batching and with ``max_batch_frames = 1`` (one message per
+   frame, as before batching): frames fed, handed to the client, acknowledged and dropped
+   (goal: every frame acknowledged at 2,000 frames/s). The device rate above depends on the
+   machine; this tells whether publishing keeps up with a device read at 2,000 frames/s.
+5. (diagnostic) the gateway's transport alone reading 0x42 back to back (no conversion, no
    publishing), with either client (``serial_client`` "direct" and "pymodbus"), to tell the
    cost of the Modbus layer from that of conversion and publishing; and line 2 with
    pymodbus' client.
@@ -76,7 +85,7 @@ from gateway.modbus.vendor_fc import VendorRead
 from gateway.mqtt.publisher import MqttPublisher
 from gateway.runtime.poller import Poller
 from gateway.runtime.priority import yield_to_poll_loop
-from gateway.runtime.snapshot import GatewaySnapshot
+from gateway.runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from gateway.web import FrameHub
 
 from .bench_mqtt import _start_mosquitto
@@ -97,6 +106,8 @@ ANSWER_BYTES = 5 + 2 * POINTS
 BITS_PER_CHAR = 11
 GAP_CHARS = 3.5
 GOAL_FPS = 1000.0
+#: the rate at which MQTT alone is fed a 60-point frame (line 4)
+PACED_FPS = 2000.0
 GOAL_RATIO = 0.9
 WARM_UP_S = 0.5
 DRIFT = "{ creep_fraction = 0.05, creep_tau_s = 20.0 }"
@@ -245,6 +256,7 @@ class GatewayRun:
     mqtt_sent: int = 0
     mqtt_acknowledged: int = 0
     mqtt_messages: int = 0
+    sample: DeviceSnapshot | None = None  # the last polled snapshot (for line 4)
 
 
 async def gateway_round(config: GatewayConfig, seconds: float, run: GatewayRun) -> None:
@@ -257,14 +269,17 @@ async def gateway_round(config: GatewayConfig, seconds: float, run: GatewayRun) 
     frames = 0
     polled = 0  # every poll the publisher is given a frame of (``polled``, up or not)
     last = None
+    good: DeviceSnapshot | None = None  # the last polled snapshot of the device up
 
     def count(snap: GatewaySnapshot) -> None:
-        nonlocal frames, last, polled
+        nonlocal frames, last, polled, good
         dev = snap.devices.get(name)
         if dev is None or dev is last:
             return
         last = dev
         polled += dev.polled
+        if dev.polled and dev.up:
+            good = dev
         if counting and dev.polled and dev.up:
             frames += 1
 
@@ -301,8 +316,53 @@ async def gateway_round(config: GatewayConfig, seconds: float, run: GatewayRun) 
         run.mqtt_acknowledged += sum(stats.published.values())
         run.mqtt_messages += stats.messages
     run.errors += sum(runner.counters.read_errors_total.values())
+    run.sample = good or run.sample
     if runner.last_error:
         raise RuntimeError(f"gateway: {runner.last_error}")
+
+
+@dataclasses.dataclass
+class PacedRun:
+    fed_fps: float
+    fed: int
+    sent: int
+    acknowledged: int
+    dropped: int
+    messages: int
+
+
+def paced_mqtt(config: GatewayConfig, snap: DeviceSnapshot, fps: float, seconds: float) -> PacedRun:
+    """Line 4: ``snap`` published ``fps`` times a second for ``seconds`` (each a new copy whose
+    derivations this thread computes first, as the poll loop does before it hands a snapshot
+    over), then the publisher stopped (it flushes what waits); what became of the frames."""
+    publisher = MqttPublisher(config)
+    publisher.start()
+    try:
+        deadline = time.monotonic() + 10.0
+        while not publisher.stats().connected:
+            if time.monotonic() > deadline:
+                raise RuntimeError("the publisher did not connect")
+            time.sleep(0.01)
+        fed, t0 = 0, time.perf_counter()
+        while (elapsed := time.perf_counter() - t0) < seconds:
+            while fed < int(elapsed * fps):
+                fed += 1
+                dev = dataclasses.replace(snap, timestamp_s=snap.timestamp_s + fed)
+                for fn in publisher.derivations:
+                    dev.derived(fn)
+                publisher.on_snapshot(GatewaySnapshot.build({dev.device: dev}, {}, fed))
+            time.sleep(0.0005)
+    finally:
+        publisher.stop()
+    stats = publisher.stats()
+    return PacedRun(
+        fed / elapsed,
+        fed,
+        sum(stats.sent.values()),
+        sum(stats.published.values()),
+        sum(stats.dropped.values()),
+        stats.messages,
+    )
 
 
 async def transport_only(config: GatewayConfig, seconds: float) -> tuple[float, int]:
@@ -433,7 +493,51 @@ async def _bench() -> None:
                         transport_fps[client].append((await transport_only(config, slot))[0])
                     await asyncio.sleep(0.05)
                     await gateway_round(pymodbus_config, slot, pymodbus_run)
+        paced: list[tuple[str, PacedRun]] = []
+        sample = runs["skin60-mn"].sample
+        if mqtt_port is not None and sample is not None:
+            for batching in ("default", "off"):
+                config = configs["skin60-mn"]
+                mqtt = config.mqtt
+                assert mqtt is not None
+                if batching == "off":
+                    mqtt = dataclasses.replace(mqtt, max_batch_frames=1)
+                    config = dataclasses.replace(config, mqtt=mqtt)
+                what = (
+                    "max_batch_frames = 1 (no batching)"
+                    if batching == "off"
+                    else f"max_batch_frames = {mqtt.max_batch_frames}, "
+                    f"batch_interval_s = {mqtt.batch_interval_s:g} (the default)"
+                )
+                paced.append(
+                    (what, await asyncio.to_thread(paced_mqtt, config, sample, PACED_FPS, MEASURE_S))
+                )
     mqtt_note = "MQTT (local mosquitto, JSON, QoS 1)" if mqtt_port else "NO MQTT (mosquitto not installed)"
+    _print_rounds(cores, bare_fps, transport_fps, runs, pymodbus_run, mqtt_note, mqtt_port)
+    for what, p in paced:
+        every = "met" if p.acknowledged == p.fed and not p.dropped else "NOT met"
+        print(
+            f"  MQTT at {PACED_FPS:,.0f} frames/s: a {POINTS}-point frame, each derived as the poll loop "
+            f"does, fed for {MEASURE_S:g} s "
+            f"(JSON, QoS 1, {what}):"
+        )
+        print(
+            f"    fed {p.fed_fps:7.1f} frames/s: {p.fed} fed, {p.sent} handed to the client, "
+            f"{p.acknowledged} acknowledged, {p.dropped} dropped, "
+            f"{p.acknowledged / max(1, p.messages):.1f} frames/message "
+            f"(goal: every frame acknowledged: {every})"
+        )
+
+
+def _print_rounds(
+    cores: str,
+    bare_fps: dict[str, list[float]],
+    transport_fps: dict[str, list[float]],
+    runs: dict[str, GatewayRun],
+    pymodbus_run: GatewayRun,
+    mqtt_note: str,
+    mqtt_port: int | None,
+) -> None:
     print(f"RTU {BAUD:,} baud on a socat pty pair, skin60 (60 points, function 0x42), {ROUNDS} rounds")
     print(f"  {cores}; {os.cpu_count()} cores")
     print(

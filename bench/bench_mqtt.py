@@ -14,6 +14,9 @@ persistence), with a simulated 64-channel array in its own process (as ``bench_g
    a ratio to MQTT off, in alternating rounds of the same run (goal >= 0.9), for the default
    batching and for each of ``BATCHINGS``; with the frames polled while publishing, handed to
    the client, acknowledged by the broker and dropped (goal: all acknowledged, none dropped).
+   On a machine shared with other work the ratio varies from round to round with the others'
+   load; the CPU time per poll (the gateway's process, all its threads, and the broker's,
+   with MQTT off and on) does much less, and says what publishing costs a poll.
 
 Each measurement runs for ``BENCH_SECONDS`` (default 5) seconds.
 """
@@ -102,6 +105,15 @@ class PollRun:
     acknowledged: int  # acknowledged by the broker (QoS 1)
     dropped: int
     messages: int  # acknowledged messages
+    off_cpu_s: float  # the gateway process's CPU time per poll, MQTT off
+    on_cpu_s: float  # and on
+    broker_cpu_s: float  # the broker's CPU time per poll, MQTT on
+
+
+def _cpu_s(pid: int) -> float:
+    """CPU time (user + system) of process ``pid`` so far, in seconds (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _publisher_rate(config: GatewayConfig, snap: DeviceSnapshot) -> tuple[float, float]:
@@ -139,7 +151,7 @@ def _publisher_rate(config: GatewayConfig, snap: DeviceSnapshot) -> tuple[float,
         publisher.stop()
 
 
-async def _poll_rates(config: GatewayConfig) -> PollRun:
+async def _poll_rates(config: GatewayConfig, broker_pid: int) -> PollRun:
     """Back-to-back polls per second without and with publishing, alternating rounds; what
     became of the frames polled while publishing."""
     poller = Poller(config)
@@ -165,6 +177,9 @@ async def _poll_rates(config: GatewayConfig) -> PollRun:
     await worker.transport.connect()
     slot = MEASURE_S / ROUNDS
     rates: dict[bool, list[float]] = {False: [], True: []}
+    polls = {False: 0, True: 0}
+    cpu = {False: 0.0, True: 0.0}
+    broker_cpu = 0.0
     try:
         for _ in range(ROUNDS):
             for state in (False, True):
@@ -172,11 +187,16 @@ async def _poll_rates(config: GatewayConfig) -> PollRun:
                 for _ in range(5):
                     await worker.poll_device(runner)
                 n, t0 = 0, time.perf_counter()
+                c0, b0 = time.process_time(), _cpu_s(broker_pid)
                 while (elapsed := time.perf_counter() - t0) < slot:
                     if not await worker.poll_device(runner):
                         raise RuntimeError(f"poll failed: {runner.last_error}")
                     n += 1
                 rates[state].append(n / elapsed)
+                polls[state] += n
+                cpu[state] += time.process_time() - c0
+                if state:
+                    broker_cpu += _cpu_s(broker_pid) - b0
                 worker.settle_now(runner)
     finally:
         on = False
@@ -191,6 +211,9 @@ async def _poll_rates(config: GatewayConfig) -> PollRun:
         sum(stats.published.values()),
         sum(stats.dropped.values()),
         stats.messages,
+        cpu[False] / polls[False],
+        cpu[True] / polls[True],
+        broker_cpu / polls[True],
     )
 
 
@@ -227,7 +250,7 @@ async def bench() -> None:
                 )
             for batching in (None, *BATCHINGS):
                 config = _with_mqtt(base, broker_port, "json", 1, batching)
-                run = await _poll_rates(config)
+                run = await _poll_rates(config, broker.pid)
                 default = " (the default)" if batching is None else ""
                 print(f"  gateway back-to-back polls, JSON, QoS 1, {_batching_text(config)}{default}:")
                 print(
@@ -238,6 +261,11 @@ async def bench() -> None:
                     f"    frames polled while on {run.polled}, handed to the client {run.sent}, "
                     f"acknowledged {run.acknowledged}, dropped {run.dropped}; "
                     f"{run.acknowledged / max(1, run.messages):.1f} frames/message"
+                )
+                off_us, on_us, broker_us = (1e6 * run.off_cpu_s, 1e6 * run.on_cpu_s, 1e6 * run.broker_cpu_s)
+                print(
+                    f"    CPU per poll: gateway {off_us:5.0f} us off, {on_us:5.0f} us on "
+                    f"(+{on_us - off_us:4.0f} us), broker {broker_us:4.0f} us on"
                 )
         finally:
             broker.terminate()
