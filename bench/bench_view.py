@@ -1,5 +1,5 @@
-"""``tactile-gateway view``'s load: a record whose rows each have their own time against the
-same rows with shared times (issue 33 §8).
+"""``tactile-gateway view``'s load and ``apply``: a record whose rows each have their own time
+against the same rows with shared times (issue 33 §8).
 
 For each case, two records of the same rows (the same channels, resistances in the same
 order, a reference force) are written: "shared", where the k-th row of every channel is at
@@ -8,7 +8,9 @@ one time (a device sample of all channels), and "distinct", where every row has 
 as ``view`` loads it before serving (``load_playback``: read, replay, frames, and the page's
 JSON body, ``PlaybackPage``), with the fallback layout; the time of the distinct record over
 the shared one's, in the same run, is the ratio (goal: a small factor; before the fix each row
-of its own cost one conversion of the whole device, about 3 ms).
+of its own cost one conversion of the whole device, about 3 ms). ``apply_calibration`` (a
+calibration of every channel with r0 = 150 kohm, the record read beforehand) is timed the same
+way.
 
 Cases: 16 and 64 channels at 1,000, 2,000 and 4,000 distinct times (rows), and the two record
 sizes of the issue (82 KB and 0.87 MB, 16 channels). ``BENCH_VIEW_CASES`` limits the cases to
@@ -23,7 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from gateway.analysis.records import RecordWriter
+from gateway.analysis.apply import apply_calibration
+from gateway.analysis.records import RecordWriter, read_record
 from gateway.cli.view_cmd import load_playback
 from gateway.web.playback import PlaybackPage
 
@@ -66,6 +69,14 @@ def _rows_for_bytes(target: int, channels: int, where: Path) -> int:
     return max(channels, round(probe * target / size))
 
 
+def _apply_s(path: Path, calibration: Path) -> float:
+    """Seconds for ``apply_calibration`` over ``path`` (the record read beforehand)."""
+    record = read_record(path)
+    start = time.perf_counter()
+    apply_calibration(calibration, record)
+    return time.perf_counter() - start
+
+
 def _load_s(path: Path) -> tuple[float, int, int]:
     """Seconds to load ``path`` as ``view`` does, its frames and its device samples."""
     start = time.perf_counter()
@@ -95,6 +106,16 @@ def main() -> None:
                 f"  {label:15s} {rows:6d} rows, {size / 1e3:7.1f} KB: shared {shared_s:6.2f} s "
                 f"({shared_n} samples), distinct {distinct_s:6.2f} s ({distinct_n} samples, "
                 f"{frames} frames), ratio {distinct_s / shared_s:5.2f}",
+                flush=True,
+            )
+            calibration = where / "cal.toml"
+            calibration.write_text(
+                "".join(f'[channel."ch{k:02d}"]\nr0_ohm = 150e3\n' for k in range(channels))
+            )
+            shared_s, distinct_s = _apply_s(shared_path, calibration), _apply_s(distinct_path, calibration)
+            print(
+                f"  {'':15s} apply: shared {shared_s:6.2f} s, distinct {distinct_s:6.2f} s, "
+                f"ratio {distinct_s / shared_s:5.2f}",
                 flush=True,
             )
 
