@@ -135,3 +135,23 @@ def test_the_frames_of_held_snapshots_are_the_live_frames_and_quantities(tmp_pat
     assert [int(v) for v in last.status] == [OK, int(ChannelStatus.NO_CONTACT), OK]
     assert last.force_n[1] == 0.0 and last.force_n[2] == held.force_n[2] > 0.0
     assert last.force_n[0] < snaps[-2].force_n[0]  # 25 kohm after 20 kohm
+
+
+def test_a_thinned_record_keeps_the_count_and_holds_every_channel(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """30 rows over three channels, each its own time, thinned to at most 7 frames: the page
+    says 30 device samples, and the last frame (always kept) shows each channel's last reading,
+    not one channel's reading beside errors."""
+    from gateway.cli import view_cmd
+    from gateway.web import playback
+
+    monkeypatch.setattr(view_cmd, "thin", lambda n: playback.thin(n, 7))
+    rows = [(0.1 * k, "abc"[k % 3], (15e3, 40e3, 160e3)[k % 3]) for k in range(30)]
+    pb = load_playback(_write(tmp_path / "rec.csv", rows), None, None)
+    assert pb.samples_total == 30 and len(pb.frames) <= 7
+    last = pb.frames[-1]
+    assert last["t"] == 2.9 and last["status"] == [OK, OK, OK]
+    a, b, c = last["force_n"]
+    assert a is not None and b is not None and c is not None and a > b > c > 0.0  # 15 < 40 < 160 kohm
+    assert last["channels_in_contact"] == 3
