@@ -4,20 +4,25 @@ An array that is never wholly unloaded (a hand, a part sliding across it) still 
 channel unloaded for part of the time. Over a window of polls every channel is searched on its
 own (``rest_stretch``) for a stretch of at least ``MIN_POLLS`` polls that is
 
-* at the channel's own extreme: its least loaded level, the highest resistance (the lowest
-  conductance) it reached, taken as the best mean of ``MIN_POLLS`` consecutive polls; a poll
-  belongs to the plateau there when it is within ``max(floor, 4 sigma)`` of that level (the
-  tare's drift floor: 2 counts, or 0.5 % of the reading in ohm; sigma the standard deviation
-  of those ``MIN_POLLS`` polls: the channel's noise at rest, blind to the load's jitter
-  elsewhere in the window);
-  A gap of at most ``BRIDGE_POLLS`` polls within two bands of the level (noise, a sigma
-  estimated from few polls) does not end the plateau;
+* at the channel's own extreme, its least loaded level (the highest resistance, the lowest
+  conductance): first the best median of ``MIN_POLLS`` consecutive polls (a median, so that
+  taps among a short rest do not pull it down), with sigma the standard deviation of those
+  polls less any far below their median; the latest rest of at least ``MIN_POLLS`` polls
+  within two bands of it then gives the level again (the median of its later half, after any
+  creep back; the best of many windows sits above the rest it was picked from) and sigma
+  from its poll-to-poll steps (about 1.48 times their median absolute step over sqrt 2,
+  which a creep hardly moves). A poll belongs to the plateau when it is within
+  ``max(floor, 4 sigma)`` of the level (the band; the floor is the tare's drift floor, 2
+  counts, or 0.5 % of the reading in ohm); a gap of at most ``BRIDGE_POLLS`` polls within two
+  bands (noise) does not end it. Sigma is the channel's noise at rest, blind to the load's
+  jitter elsewhere in the window;
 * still: the tare's MOVING check (first third against last third) passes within the stretch.
   An FSR lifted after a load creeps back to its baseline over seconds to tens of seconds, so a
   stretch that still moves is cut from its start (its first third dropped) until it is still
   or too short: the recovery is left out, the settled end kept;
 * the latest such stretch: the channel's state nearest the end of the window (temperature,
-  drift), and after any recovery.
+  drift), and after any recovery; unless it is shorter than half the longest (a rest that has
+  only begun at the window's end), then the latest one at least that long.
 
 Its mean is the baseline. The checks of the whole-array tare then run per channel, each a
 reason the channel is not zeroed (and its baseline left as the file has it, ``"none"`` if it
@@ -59,8 +64,10 @@ __all__ = ["RestSearch", "RestStretch", "WindowTare", "compute_window_tare", "re
 
 #: the plateau band around a channel's extreme, in standard deviations of its noise
 PLATEAU_SIGMAS = 4.0
+#: a median absolute deviation times this is a standard deviation (normal noise)
+_MAD_TO_STD = 1.4826
 #: a gap of at most this many polls within two bands of the extreme does not end a plateau
-BRIDGE_POLLS = 2
+BRIDGE_POLLS = 5
 
 
 @dataclass(frozen=True)
@@ -86,17 +93,15 @@ class RestSearch:
     """What ``rest_stretch`` found: ``stretch`` the latest still stretch at the extreme (None
     if there is none), ``top`` the ``min_polls`` polls of the extreme itself (None with fewer
     polls), ``moving`` the last stretch at the extreme found to move (for the reason), ``why``
-    the reason there is no stretch ("" when there is one)."""
+    the reason there is no stretch ("" when there is one), ``level`` the extreme (the values'
+    units)."""
 
     stretch: RestStretch | None
     top: RestStretch | None
     moving: RestStretch | None
     why: str
-
-    @property
-    def level(self) -> float:
-        """The extreme (least loaded) level: the best mean of ``min_polls`` polls (NaN if none)."""
-        return float("nan") if self.top is None else self.top.mean
+    #: the extreme (least loaded) level: the best median of ``min_polls`` polls (NaN if none)
+    level: float = float("nan")
 
 
 def _stretch(v: FloatArray, start: int, stop: int) -> RestStretch:
@@ -140,28 +145,64 @@ def rest_stretch(
     finite = np.isfinite(x)
     if v.size < min_polls:
         return RestSearch(None, None, None, f"only {v.size} polls")
-    window_sum = np.convolve(np.where(finite, x, 0.0), np.ones(min_polls), mode="valid")
-    whole = np.convolve(finite.astype(np.float64), np.ones(min_polls), mode="valid") == min_polls
+    windows = np.lib.stride_tricks.sliding_window_view(x, min_polls)
+    whole = np.all(np.isfinite(windows), axis=1)
     if not whole.any():
         return RestSearch(None, None, None, f"no {min_polls} consecutive valid polls")
-    best = int(np.flatnonzero(whole)[np.argmax(np.where(whole, window_sum, -np.inf)[whole])])
+    # the extreme: the highest median of min_polls polls (the latest of equals), so that a
+    # rest shorter than that among taps is not averaged with them into a level
+    medians = np.where(whole, np.median(np.where(whole[:, None], windows, 0.0), axis=1), -np.inf)
+    best = int(medians.size - 1 - np.argmax(medians[::-1]))
+    level = float(medians[best])
     top = _stretch(v, best, best + min_polls)
-    level = float(window_sum[best] / min_polls)
     # the noise at the extreme itself: a moving load elsewhere in the window scatters the
-    # readings far more, which says nothing of the channel at rest
-    sigma = top.std
+    # readings far more, which says nothing of the channel at rest; the standard deviation of
+    # those polls less any far below their median (a tap among them), which a median absolute
+    # deviation finds
     floor = max(floor_abs, floor_rel * abs(level))
+    polls = windows[best]
+    rough = _MAD_TO_STD * float(np.median(np.abs(polls - level)))
+    kept = polls[polls >= level - max(floor, PLATEAU_SIGMAS * rough)]
+    sigma = float(kept.std(ddof=1)) if kept.size >= 2 else 0.0
     band = max(floor, PLATEAU_SIGMAS * sigma)
+    wide = _bridged(_runs(finite & (x >= level - 2.0 * band)), finite & (x >= level - 3.0 * band))
+    rests = [(a, b) for a, b in wide if b - a >= min_polls]
+    if rests:
+        # the best of min_polls polls sits above the rest it came from (it was picked for it),
+        # and min_polls polls say little of the noise: both again from the latest rest found
+        # with a wider band, the level from its later half (after any creep back), the noise
+        # from its poll-to-poll steps (which a creep hardly moves)
+        a, b = rests[-1]
+        level = float(np.median(x[max(a, b - max(min_polls, (b - a) // 2)) : b]))  # its settled half
+        floor = max(floor_abs, floor_rel * abs(level))
+        rest = x[a:b]
+        # a sample the device repeats between its frame updates is one measurement: its
+        # steps of 0 say nothing of the noise
+        steps = np.abs(np.diff(rest[np.concatenate([[True], rest[1:] != rest[:-1]])]))
+        noise = _MAD_TO_STD * float(np.median(steps)) / np.sqrt(2.0) if steps.size else 0.0
+        band = max(floor, PLATEAU_SIGMAS * noise)
     runs = _bridged(_runs(finite & (x >= level - band)), finite & (x >= level - 2.0 * band))
     moving: RestStretch | None = None
+    still: list[RestStretch] = []  # the still stretch of each run, latest first
     for start, stop in reversed(runs):
         while stop - start >= min_polls:
             found = _stretch(v, start, stop)
             if abs(found.drift) <= max(floor, 4.0 * found.drift_err):
-                return RestSearch(found, top, moving, "")
+                still.append(found)
+                break
             moving = moving or found
             start += (stop - start) // 3
-    return RestSearch(None, top, moving, f"never still at its own extreme for {min_polls} polls")
+    if still:
+        # the latest, unless it is short beside an earlier one: a rest that has just begun at
+        # the window's end is the creep's start, and its mean the least sure
+        enough = max(min_polls, max(p.n_polls for p in still) // 2)
+        chosen = next(p for p in still if p.n_polls >= enough)
+        return RestSearch(chosen, top, moving, "", level if unloaded_high else -level)
+    longest = max((b - a for a, b in runs), default=0)
+    why = f"never still at its own extreme for {min_polls} polls"
+    if moving is None:
+        why += f" (its longest rest there: {longest} polls)"
+    return RestSearch(None, top, moving, why, level if unloaded_high else -level)
 
 
 @dataclass(frozen=True)
@@ -223,9 +264,10 @@ def compute_window_tare(
         rest_stretch(s.values, unloaded_high=high, floor_abs=floor_abs, floor_rel=floor_rel) for s in series
     ]
     m = len(series)
-    # each channel at its least loaded: its still stretch, else the extreme itself
+    # each channel at its least loaded: its still stretch, else the extreme itself (its level,
+    # a median, over the polls of ``top``)
     rep = [f.stretch or f.top for f in found]
-    mean = np.array([np.nan if p is None else p.mean for p in rep])
+    mean = np.array([f.level if f.stretch is None else f.stretch.mean for f in found])
     labels = {int(st): st.name.lower() for st in DividerStatus}
     if counts:
         r, status = device.front_end.resistance(mean)
