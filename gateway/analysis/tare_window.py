@@ -307,7 +307,8 @@ def compute_window_tare(
                     s.index,
                     f"loaded throughout {window}: at its least loaded {where} {force[k]:.3g} N by the "
                     f"model at {r[k]:.4g} ohm, {ratio[k]:.2g}x the median conductance; allowed at rest: "
-                    f"at most {max_force_n:g} N (--max-force) and {LOADED_FACTOR:g}x the median",
+                    f"at most {max_force_n:g} N (--max-force) and {LOADED_FACTOR:g}x the median; "
+                    "sample longer, or lift the load off it for a moment",
                 )
             )
         elif f.stretch is None:

@@ -132,6 +132,7 @@ def test_a_channel_loaded_throughout_is_named_and_not_zeroed() -> None:
     ratio = conductance[14] / np.median(conductance)
     assert f"{ratio:.2g}x the median" in why  # ... and its conductance against the others'
     assert "N by the model" in why
+    assert why.endswith("3x the median; sample longer, or lift the load off it for a moment")
 
 
 def test_a_channel_recovering_by_creep_is_zeroed_from_its_later_still_stretch() -> None:

@@ -180,6 +180,19 @@ def test_nothing_rested_is_one_line_and_nothing_is_written(tmp_path: Path) -> No
     assert path.read_text(encoding="utf-8") == CONFIG
 
 
+def test_moving_load_tares_only_the_chosen_channels(tmp_path: Path) -> None:
+    """--channels with --moving-load: ch00 and ch05 zeroed at their own moments, the others
+    untouched ("none": the file had no baselines)."""
+    path = config(tmp_path)
+    result = tare(path, "--moving-load", "--from-record", str(write_record(tmp_path)), "--channels", "ch00,5")
+    assert result.exit_code == 0, result.output
+    assert "baseline_ohm written for 2 of 36 channels" in result.output
+    assert re.search(r"^  ch00: .* at 18-35\.9 s \(180 polls\)$", result.output, re.M), result.output
+    assert re.search(r"^  ch05: .* at 12-29\.9 s \(180 polls\)$", result.output, re.M), result.output
+    values = array_block(path.read_text(encoding="utf-8"), "baseline_ohm")
+    assert [i for i, v in enumerate(values) if v != '"none"'] == [0, 5]
+
+
 def test_moving_load_and_device_zero_are_refused_together(tmp_path: Path, sampled: list[float]) -> None:
     result = tare(config(tmp_path), "--moving-load", "--device-zero")
     assert result.exit_code == 2 and sampled == []
