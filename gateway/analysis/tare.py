@@ -13,7 +13,8 @@ unloaded array, naming the real cause first, with numbers:
 * LOADED: the model reads more than ``max_force_n`` (N) at a channel's baseline, or its baseline
   conductance is more than ``LOADED_FACTOR`` times the median chosen channel's (at least 4
   channels); the message says the array is loaded and names the ways out (``--channels`` for
-  the unloaded ones, ``--from-record`` with an unloaded moment, ``--device-zero``);
+  the unloaded ones, ``--from-record`` with an unloaded moment, ``--moving-load`` for a load
+  that moves (``tare_window``), ``--device-zero``);
 * MOVING: the mean of the last third of a channel's polls differs from the first third's by
   more than ``max(DRIFT_FLOOR, 4 standard errors)`` (counts, or ``DRIFT_FLOOR_REL`` of the
   reading in ohm; the standard error from the scatter within the two thirds, so a step reads
@@ -198,7 +199,8 @@ def _loaded_message(
         f"allowed at rest: at most {max_force_n:g} N (--max-force) and {LOADED_FACTOR:g}x the median "
         f"channel's conductance. A baseline under a load would hide it: lift it off and tare again, or "
         f"tare only the unloaded channels ({way}), or take the baseline from a record of an unloaded "
-        "moment (--from-record RECORD.csv --start-s S --end-s E), or zero the device itself "
+        "moment (--from-record RECORD.csv --start-s S --end-s E), or, if the load moves, zero each "
+        "channel from its own unloaded moments (--moving-load), or zero the device itself "
         "(--device-zero, if it has a zero action); nothing was written"
     )
 

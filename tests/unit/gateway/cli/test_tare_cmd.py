@@ -125,6 +125,8 @@ def test_a_loaded_array_is_refused_as_loaded_and_the_file_is_unchanged(
         f"ch20 ({one}), ch21 ({one}); allowed at rest: at most 0.5 N (--max-force)",
     )
     assert f"(--channels {UNLOADED})" in line and "--from-record" in line and "--device-zero" in line
+    # a load that moves makes the --channels list stale: the moving-load tare is named too
+    assert "if the load moves, zero each channel from its own unloaded moments (--moving-load)" in line
     assert "wiring" not in line
     assert path.read_bytes() == before
     assert board.writes == []  # a tare never writes to the device
