@@ -20,12 +20,13 @@ from typing import BinaryIO, TextIO, cast
 
 from ..atomic import AtomicFile
 from ..config import GatewayConfig
-from ..runtime.snapshot import VALUED_STATUSES, ChannelStatus, GatewaySnapshot
+from ..runtime.snapshot import READING_STATUSES, ChannelStatus, GatewaySnapshot
 from .mcap_records import McapRecordWriter, is_mcap_record
 from .records import REQUIRED_COLUMNS, RecordWriter
 
-#: the statuses whose row keeps its value: ok, no_contact, saturated, extrapolated, no_zero
-_WITH_VALUE = {int(s) for s in VALUED_STATUSES}
+#: the statuses whose row keeps its value: ok, no_contact, saturated, extrapolated, no_zero,
+#: uncalibrated (a reading without a force: what ``calibrate`` needs)
+_WITH_VALUE = {int(s) for s in READING_STATUSES}
 _OPEN = int(ChannelStatus.OPEN)
 
 

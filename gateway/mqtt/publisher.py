@@ -354,11 +354,13 @@ class MqttPublisher:
             return self._meta_due or len(self._queue) >= self.settings.max_batch_frames
 
     def _loop_timeout_s(self, now: float) -> float:
-        """How long the network loop may wait for the socket: until the next drain is due."""
-        if not self._batching() or not self._queue:
-            return LOOP_TIMEOUT_S
+        """How long the network loop may wait for the socket: until the next drain is due; once
+        it is past (the drain found no room: the window is full, or the broker is away), for
+        acknowledgements as without batching, never 0 s over and over (a spinning thread)."""
         due = self._last_drain_s + self.settings.batch_interval_s - now
-        return min(LOOP_TIMEOUT_S, max(0.0, due))
+        if not self._batching() or not self._queue or due <= 0.0:
+            return LOOP_TIMEOUT_S
+        return min(LOOP_TIMEOUT_S, due)
 
     def _take(self, messages: int) -> list[list[tuple[str, int, DeviceSnapshot]]]:
         """At most ``messages`` groups of queued frames (the caller holds the lock), each of one

@@ -37,7 +37,7 @@ from gateway.mqtt.payload import (
     encode_json_batch,
     encode_json_frame,
 )
-from gateway.mqtt.publisher import INFLIGHT_WINDOW, MqttPublisher
+from gateway.mqtt.publisher import INFLIGHT_WINDOW, LOOP_TIMEOUT_S, MqttPublisher
 from gateway.mqtt.subscriber import FrameStream
 from gateway.runtime.snapshot import STATUS_LABELS, GatewaySnapshot
 
@@ -308,3 +308,18 @@ def test_a_config_object_refuses_a_batch_size_out_of_range() -> None:
     with pytest.raises(ConfigError, match=r"max_batch_frames: 0 .*1\.\.1000"):
         MqttConfig("h", 1883, None, None, None, "c", "p", "g", max_batch_frames=0)
     assert not math.isnan(MqttConfig("h", 1883, None, None, None, "c", "p", "g").batch_interval_s)
+
+
+def test_the_network_loop_never_spins_while_frames_wait_for_the_window() -> None:
+    """With the interval passed but no room (every message of the window in flight), the
+    client waits on its socket for acknowledgements (``LOOP_TIMEOUT_S``), not for 0 s over
+    and over: a spinning publisher thread would take the poll loop's CPU."""
+    publisher, _client = publisher_with(qos=1, max_batch_frames=2, batch_interval_s=0.01)
+    poll(publisher, 2 * INFLIGHT_WINDOW + 3)
+    publisher._drain(now=100.0)
+    assert publisher.stats().queued == 3  # the window is full
+    assert publisher._loop_timeout_s(now=100.004) == pytest.approx(0.006)  # wake for the next drain
+    assert publisher._drain_due(now=100.02)
+    publisher._drain(now=100.02)  # no room: nothing goes out
+    assert publisher.stats().queued == 3
+    assert publisher._loop_timeout_s(now=100.02) == LOOP_TIMEOUT_S
