@@ -25,7 +25,7 @@ from ..modbus.register_map import (
     RegisterMap,
     config_word,
 )
-from ..model import FrontEnd, SensorParams, UnknownEffectError, parse_effects
+from ..model import FrontEnd, RatioFrontEnd, SensorParams, UnknownEffectError, parse_effects
 from ..model.conversion import Conversion
 from ..model.curves import CurveChannel, Drift
 from ..model.params import Interval
@@ -293,6 +293,18 @@ class DeviceConfig:
     @property
     def enabled_channels(self) -> tuple[ChannelConfig, ...]:
         return tuple(ch for ch in self.channels if ch.enabled)
+
+    def needs_calibration(self, channel: ChannelConfig) -> bool:
+        """Whether ``channel`` has nothing to read a force with: a ``ratio`` front end reads
+        r / R_ref of an unknown reference resistor, where the default sensor parameters (ohm)
+        mean nothing, and the channel has neither a calibration table nor parameters of its own.
+        It reads ``uncalibrated``: its reading, no force (docs/front-ends.md)."""
+        return (
+            self.encoding is Encoding.ADC
+            and isinstance(self.front_end, RatioFrontEnd)
+            and channel.conversion is None
+            and channel.params_source == ("defaults",)
+        )
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,8 @@ this table and nothing else: ``collector.SnapshotCollector`` (prometheus_client 
 added here appears in both, with the same samples.
 
 Values are floats in the unit the name ends with: newtons (N), ohms, millimetres (mm), square
-millimetres (mm^2), seconds (s); counts and 0/1 flags are dimensionless. A value that is
+millimetres (mm^2), seconds (s); counts, 0/1 flags and ratios (``_ratio``: a ratio front end's
+r / R_ref) are dimensionless. A value that is
 absent (NaN or infinite: an open or stale channel, no contact for the centre of pressure, a
 device never polled) is left out, never exported as NaN. Devices are exported in the order of
 their names, family by family in the order of ``FAMILIES``.
@@ -68,10 +69,15 @@ class Family:
 # ---------------------------------------------------------------- samplers, per channel
 
 
-def _channel_values(array: Callable[[DeviceSnapshot], FloatArray]) -> Sampler:
-    """Samples ``(device, channel)`` of a per-channel array of the snapshot, finite values only."""
+def _channel_values(
+    array: Callable[[DeviceSnapshot], FloatArray], of: Callable[[DeviceSnapshot], bool] | None = None
+) -> Sampler:
+    """Samples ``(device, channel)`` of a per-channel array of the snapshot, finite values only;
+    with ``of``, only of the devices it is true for."""
 
     def samples(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
+        if of is not None and not of(dev):
+            return
         values: list[float] = array(dev).tolist()
         for channel, value in zip(dev.channel_names, values, strict=True):
             if math.isfinite(value):
@@ -188,9 +194,18 @@ FAMILIES: Final[tuple[Family, ...]] = (
     Family(
         "tactile_resistance_ohms",
         "gauge",
-        f"Sensor resistance in ohms, {_FROM_POLL}; absent when open or invalid",
+        f"Sensor resistance in ohms, {_FROM_POLL}; absent when open or invalid, and for a ratio "
+        "front end (see tactile_resistance_ratio)",
         ("device", "channel"),
-        _channel_values(lambda dev: dev.resistance_ohm),
+        _channel_values(lambda dev: dev.resistance_ohm, lambda dev: not dev.resistance_relative),
+    ),
+    Family(
+        "tactile_resistance_ratio",
+        "gauge",
+        "Sensor resistance relative to the board's reference resistor, r / R_ref (dimensionless), "
+        f"of a ratio front end, whose R_ref is unknown, {_FROM_POLL}; absent when open or invalid",
+        ("device", "channel"),
+        _channel_values(lambda dev: dev.resistance_ohm, lambda dev: dev.resistance_relative),
     ),
     Family(
         "tactile_channel_status",

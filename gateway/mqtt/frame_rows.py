@@ -7,10 +7,10 @@ from __future__ import annotations
 import math
 from typing import Any, Final
 
-from ..runtime.snapshot import CONTACT_STATUSES, VALUED_STATUSES
+from ..runtime.snapshot import CONTACT_STATUSES, READING_STATUSES
 
-#: ok, no_contact, saturated, extrapolated, no_zero
-_WITH_VALUE: Final = frozenset(s.label for s in VALUED_STATUSES)
+#: ok, no_contact, saturated, extrapolated, no_zero, uncalibrated
+_WITH_VALUE: Final = frozenset(s.label for s in READING_STATUSES)
 _CONTACT: Final = frozenset(s.label for s in CONTACT_STATUSES)  # ok, saturated, extrapolated
 
 
@@ -34,7 +34,7 @@ def recordable(fields: dict[str, Any]) -> tuple[list[tuple[str, float]], int]:
     """A frame's record rows (channel, resistance in ohm) and how many channels have none.
 
     As ``tactile-gateway record``: an open channel is ``inf``; a channel whose status carries
-    a value (ok, no_contact, saturated, extrapolated, no_zero) records its resistance, ``inf``
+    a reading (ok, no_contact, saturated, extrapolated, no_zero, uncalibrated) records its resistance, ``inf``
     when not finite; a short, stale or error channel has no row (counted). A frame of a device that was not
     polled successfully (``up`` false) has no rows at all.
     """

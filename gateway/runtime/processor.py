@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from ..config import ChannelConfig, DeviceConfig, Encoding
 from ..errors import DecodeError
 from ..modbus.image import RawSample
-from ..model import ModelState, SensorModel
+from ..model import ModelState, RatioFrontEnd, SensorModel
 from ..model.curves import CurveChannel, CurveSet, CurveState, Drift, LineCurve
 from .baseline import BaselineCorrection
 from .clock import NO_CLOCK_HISTORY, ClockHealth, time_step
@@ -69,6 +69,7 @@ from .status_tables import (
     _CHANNEL_OPEN,
     _CHANNEL_SHORT,
     _CHANNEL_STALE,
+    _CHANNEL_UNCALIBRATED,
     _FINAL_STATUS,
     _FORCE_EXTRAPOLATED,
     _FORCE_INVALID,
@@ -223,6 +224,11 @@ class DeviceProcessor:
                  for c in chans], dtype=np.bool_,
             )  # fmt: skip
             self._unzeroed = frozen_copy(unzeroed) if unzeroed.any() else None
+        # channels with nothing to read force with (a ratio front end's, uncalibrated): a
+        # reading, no force
+        uncalibrated = np.array([device.needs_calibration(c) for c in chans], dtype=np.bool_)
+        self._uncalibrated = frozen_copy(uncalibrated) if uncalibrated.any() else None
+        self._relative = device.encoding is Encoding.ADC and isinstance(device.front_end, RatioFrontEnd)
 
     def _tare(self, r_model: FloatArray) -> FloatArray:
         """``r_model`` with each baseline channel's excess conductance taken off."""
@@ -469,6 +475,8 @@ class DeviceProcessor:
         status = _FINAL_STATUS[code]
         if tracked.unzeroed is not None:
             status = np.where(tracked.unzeroed & (status == _CHANNEL_OK), np.int8(_CHANNEL_NO_ZERO), status)
+        if self._uncalibrated is not None:
+            status = np.where(self._uncalibrated & VALUED[status], np.int8(_CHANNEL_UNCALIBRATED), status)
         valued = VALUED[status]
         force = np.where(valued, tracked.force_n, np.nan)
         reference = self._no_values
@@ -520,6 +528,7 @@ class DeviceProcessor:
             temperature_c=None
             if temperature is None
             else read_only(np.asarray(temperature, dtype=np.float64)),
+            resistance_relative=self._relative,
         )
         s = tracked.state
         return snap, replace(s, last=snap)
@@ -560,6 +569,7 @@ class DeviceProcessor:
                 device_time_s=None,
                 poll_interval_s=self.poll_interval_s,
                 error=error,
+                resistance_relative=self._relative,
             )
         else:
             snap = replace(last, status=stale_status, up=False, timestamp_s=wall_time_s, error=error)

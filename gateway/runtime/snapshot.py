@@ -51,6 +51,11 @@ class ChannelStatus(enum.IntEnum):
     #: board's leak or the converter's offset rather than a load. The value is kept, but it
     #: is not counted as contact (total force, area, centre of pressure); tare the channel
     NO_ZERO = 8
+    #: a reading without a force: a ``ratio`` front end's channel (r / R_ref of an unknown
+    #: reference resistor) with neither a calibration nor parameters of its own, where the
+    #: default parameters (ohm) would read a made-up force. The reading is kept (and
+    #: recorded, for ``calibrate``); no force, not counted in any array quantity
+    UNCALIBRATED = 9
 
     @property
     def label(self) -> str:
@@ -84,6 +89,8 @@ VALUED_STATUSES: tuple[ChannelStatus, ...] = (
     ChannelStatus.EXTRAPOLATED,
     ChannelStatus.NO_ZERO,
 )
+#: The statuses whose channel carries a reading (a resistance, in ohm or R_ref), with or without a force.
+READING_STATUSES: tuple[ChannelStatus, ...] = (*VALUED_STATUSES, ChannelStatus.UNCALIBRATED)
 CONTACT_STATUSES: tuple[ChannelStatus, ...] = (
     ChannelStatus.OK,
     ChannelStatus.SATURATED,
@@ -256,6 +263,9 @@ class DeviceSnapshot:
     #: False only for the placeholder a device is listed with before its first poll completes
     #: (no observation: the stream and MQTT publish nothing for it; a failed poll is True)
     polled: bool = True
+    #: True when ``resistance_ohm`` holds r / R_ref (dimensionless), not ohm: a ``ratio`` front
+    #: end's readings, in units of the board's unknown reference resistor
+    resistance_relative: bool = False
     _static: Once[FloatArray] = field(default_factory=Once, init=False, repr=False, compare=False)
     _derived: dict[object, Once[object]] = field(default_factory=dict, init=False, repr=False, compare=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False, compare=False)

@@ -3,7 +3,8 @@ into force, which effects are tracked and by which clock, where each channel's p
 come from, and which forces rest on assumed circuit values rather than on a calibration.
 A ``ratio`` front end (``gateway.model.RatioFrontEnd``) assumes no circuit value: its
 readings are in units of the board's unknown reference resistor, so its forces rest on a
-calibration or on nothing meaningful (the default parameters are in ohm).
+calibration: a channel without one reads ``uncalibrated``, no force (the default parameters
+are in ohm and do not apply), and the lines say how to calibrate it.
 
 ``check-config`` and ``poll-once`` print these lines, so a user can see whether drift
 correction is on without reading the code.
@@ -70,6 +71,8 @@ def _tracking(device: DeviceConfig) -> list[str]:
                 way += f" (drift correction on, {_clock(device)})"
             else:
                 way += " (no drift correction)"
+        elif device.needs_calibration(ch):
+            way = "none: reads `uncalibrated` (r/R_ref without a calibration; see `assumes:`)"
         else:
             tracked = [e for e in ch.effects if e in ("creep", "hysteresis", "creep2", "temperature")]
             dynamic = [e for e in tracked if e != "temperature"]
@@ -103,7 +106,7 @@ def _assumptions(device: DeviceConfig) -> str:
     calibrated = sum(1 for ch in chans if "calibration" in ch.params_source)
     rest = len(chans) - calibrated
     if device.encoding is Encoding.ADC and isinstance(device.front_end, RatioFrontEnd):
-        return _ratio_assumptions(device.front_end, calibrated, rest)
+        return _ratio_assumptions(device, device.front_end, calibrated)
     circuit = (
         "the front end's values (reference resistor, full scale)"
         if device.encoding is Encoding.ADC
@@ -116,9 +119,10 @@ def _assumptions(device: DeviceConfig) -> str:
     return f"assumes: {circuit} and the default sensor parameters: no channel is calibrated (see `calibrate`)"
 
 
-def _ratio_assumptions(front_end: RatioFrontEnd, calibrated: int, rest: int) -> str:
+def _ratio_assumptions(device: DeviceConfig, front_end: RatioFrontEnd, calibrated: int) -> str:
     """A ratio front end assumes only the divider's topology; its readings are in units of the
-    unknown reference resistor, where the default sensor parameters (ohm) mean nothing."""
+    unknown reference resistor, where the default sensor parameters (ohm) mean nothing: a
+    channel without a calibration or parameters of its own reads ``uncalibrated`` (no force)."""
     side = (
         "rise with load: sensor on the high side"
         if front_end.rises_with_load
@@ -129,18 +133,24 @@ def _ratio_assumptions(front_end: RatioFrontEnd, calibrated: int, rest: int) -> 
         f"nothing of the circuit but its topology (rises_with_load = {flag}: counts {side}); "
         "readings are relative, in units of the unknown reference resistor"
     )
-    meaningless = "the default sensor parameters are in ohm and do not apply"
-    if not rest:
-        return f"assumes: {circuit}; forces rest on the calibration of every channel"
-    if calibrated:
-        return (
-            f"assumes: {circuit}; {calibrated} channels calibrated, {rest} not: their forces are not "
-            f"meaningful until `calibrate` ({meaningless})"
-        )
-    return (
-        f"assumes: {circuit}; no channel is calibrated: forces are not meaningful until `calibrate` "
-        f"({meaningless})"
+    chans = device.enabled_channels
+    needing = sum(1 for ch in chans if device.needs_calibration(ch))
+    given = len(chans) - calibrated - needing
+    parts = [f"{calibrated} channels calibrated"] if calibrated else []
+    if given:
+        parts.append(f"{given} on parameters given in the configuration (in units of R_ref)")
+    if not needing:
+        if not given:
+            return f"assumes: {circuit}; forces rest on the calibration of every channel"
+        return f"assumes: {circuit}; " + ", ".join(parts)
+    how = (
+        f"{needing} channels read `uncalibrated` (no force: the default sensor parameters are in ohm "
+        "and do not apply) until calibrated: record them under known loads "
+        "(`tactile-gateway record -c CONFIG --duration S --out RECORD.csv`), then "
+        "`tactile-gateway calibrate RECORD.csv --model auto --out CAL.toml --install CONFIG`"
     )
+    lead = ", ".join(parts) + ", " if parts else "no channel is calibrated: "
+    return f"assumes: {circuit}; {lead}{how}"
 
 
 def device_summary(device: DeviceConfig) -> list[str]:

@@ -12,7 +12,7 @@
 "use strict";
 
 const ST = { OK: 0, NO_CONTACT: 1, SATURATED: 2, OPEN: 3, SHORT: 4, STALE: 5, ERROR: 6, EXTRAPOLATED: 7,
-             NO_ZERO: 8 };
+             NO_ZERO: 8, UNCALIBRATED: 9 };
 // the statuses whose channel carries a force (drawn in the colour of its force)
 const VALUED = new Set([ST.OK, ST.NO_CONTACT, ST.SATURATED, ST.EXTRAPOLATED, ST.NO_ZERO]);
 // a channel without a zero read at the converter's idle floor: a dotted grey outline
@@ -295,9 +295,11 @@ function drawMap(canvas, d, opts) {
       }
     } else {
       const fill = { [ST.OPEN]: ["#555", "#222"], [ST.SHORT]: ["#d0307a", "#401020"],
-                     [ST.STALE]: ["#3a4048", "#3a4048"], [ST.ERROR]: ["#000", "#000"] }[status] || ["#000", "#000"];
+                     [ST.STALE]: ["#3a4048", "#3a4048"], [ST.ERROR]: ["#000", "#000"],
+                     [ST.UNCALIBRATED]: ["#2c3440", "#1c2026"] }[status] || ["#000", "#000"];
       hatch(ctx, x, y, side, fill[0], fill[1]);
-      label = { [ST.OPEN]: "OPEN", [ST.SHORT]: "SHORT", [ST.STALE]: "STALE", [ST.ERROR]: "ERR" }[status];
+      label = { [ST.OPEN]: "OPEN", [ST.SHORT]: "SHORT", [ST.STALE]: "STALE", [ST.ERROR]: "ERR",
+                [ST.UNCALIBRATED]: "UNCAL" }[status];
       if (status === ST.ERROR) { ctx.strokeStyle = "#f33"; ctx.lineWidth = 2; ctx.strokeRect(x, y, side, side); }
     }
     if (stale && status !== ST.STALE) {

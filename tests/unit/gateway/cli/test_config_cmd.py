@@ -179,9 +179,14 @@ def test_check_config_of_a_ratio_front_end_says_what_rests_on_nothing(tmp_path: 
     assert result.exit_code == 0, result.output
     out = result.stdout
     assert (
-        "    " + RATIO_CIRCUIT + "no channel is calibrated: forces are not meaningful until `calibrate` "
-        "(the default sensor parameters are in ohm and do not apply)\n"
+        "    " + RATIO_CIRCUIT + "no channel is calibrated: 4 channels read `uncalibrated` (no force: the "
+        "default sensor parameters are in ohm and do not apply) until calibrated: record them under known "
+        "loads (`tactile-gateway record -c CONFIG --duration S --out RECORD.csv`), then "
+        "`tactile-gateway calibrate RECORD.csv --model auto --out CAL.toml --install CONFIG`\n"
     ) in out
+    no_force = "    force: none: reads `uncalibrated` (r/R_ref without a calibration; see `assumes:`): "
+    no_force += "4 channels\n"
+    assert no_force in out
     assert "    front end: ratio: r/R_ref = FS/code - 1 (counts rise with load" in out
     assert "reads 0.0002443 R_ref .. 4094 R_ref" in out and "no circuit value is assumed" in out
     assert "the front end's values (reference resistor, full scale)" not in out
@@ -197,7 +202,7 @@ def test_check_config_of_a_calibrated_ratio_front_end(tmp_path: Path) -> None:
     assert (
         "assumes: nothing of the circuit but its topology (rises_with_load = false: counts fall with load: "
         "sensor below a pull-up); readings are relative, in units of the unknown reference resistor; "
-        "1 channels calibrated, 3 not: their forces are not meaningful until `calibrate`"
+        "1 channels calibrated, 3 channels read `uncalibrated` (no force: the default sensor parameters"
     ) in result.stdout
     assert "front end: ratio: r/R_ref = code/(FS - code) (counts fall with load" in result.stdout
     every = "".join(f'[channel."ch{i:02d}"]\nr0_ohm = 20.0\n' for i in range(4))

@@ -182,7 +182,9 @@ def test_status_has_one_series_per_status_and_one_is_set() -> None:
         assert [k for k, v in series.items() if v == 1.0] == [expected]
     # the HELP text lists every status label, the new one last (its code is 7)
     doc = families["tactile_channel_status"].documentation  # type: ignore[attr-defined]
-    assert doc.endswith("ok, no_contact, saturated, open, short, stale, error, extrapolated, no_zero"), doc
+    assert doc.endswith(
+        "ok, no_contact, saturated, open, short, stale, error, extrapolated, no_zero, uncalibrated"
+    ), doc
 
 
 def test_absent_values_are_left_out_never_nan() -> None:

@@ -128,7 +128,7 @@ def test_promtool_accepts_it(tmp_path: Path, seed: int) -> None:
     text = render(_snapshot(seed, 3, ["arr"]))
     # the snapshots carry the extrapolated status (a force outside a calibrated range)
     assert re.search(r'tactile_channel_status\{[^}]*status="extrapolated"\} 1\.0\n', text), text
-    assert "stale, error, extrapolated, no_zero\n" in text  # the HELP text lists them
+    assert "stale, error, extrapolated, no_zero, uncalibrated\n" in text  # the HELP text lists them
     path.write_text(text)
     with path.open("rb") as f:
         result = subprocess.run(

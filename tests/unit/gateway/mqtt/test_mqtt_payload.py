@@ -143,13 +143,14 @@ def test_an_extrapolated_channel_in_json_and_binary_frames() -> None:
     assert json.loads(encode_json(frame))["status"][0] == "extrapolated"
     data = encode_binary(frame)
     codes = np.frombuffer(data, np.uint8, 4, 64 + 12 * 4).tolist()
-    assert codes == [7, 3, 4, 7] and STATUS_LABELS[7] == "extrapolated" and len(STATUS_LABELS) == 9
+    assert codes == [7, 3, 4, 7] and STATUS_LABELS[7] == "extrapolated" and len(STATUS_LABELS) == 10
     back = decode_binary(data, "arr", list(NAMES))
     assert back["status"] == frame["status"] and back["up"] is True
     assert back["force_n"] == [8.0, None, None, 0.3]
-    assert decode_binary(data[:-1] + bytes([8]))["status"][-1] == "no_zero"  # the last code
-    with pytest.raises(FrameDecodeError, match=r"status code out of range 0\.\.8"):
-        decode_binary(data[:-1] + bytes([9]))
+    assert decode_binary(data[:-1] + bytes([8]))["status"][-1] == "no_zero"
+    assert decode_binary(data[:-1] + bytes([9]))["status"][-1] == "uncalibrated"  # the last code
+    with pytest.raises(FrameDecodeError, match=r"status code out of range 0\.\.9"):
+        decode_binary(data[:-1] + bytes([10]))
 
 
 @pytest.mark.parametrize(
