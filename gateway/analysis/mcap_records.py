@@ -143,8 +143,11 @@ class McapRecordWriter:
     """The MCAP form of ``records.RecordWriter``: the same ``row`` / ``flush``, and ``close``
     (which must come before the file is committed: it writes the summary and the index).
 
-    Rows of one time and one device (the label's part before its last ``/``) in a row make
-    one message; a new time, another device or ``flush`` starts the next. ``out`` is an
+    Rows of one time and one device in a row make one message; a new time, another device or
+    ``flush`` starts the next. The device is the first ``device_levels`` parts of a channel
+    label split at ``/`` (a record of several devices labels ``device/channel``: 1; ``subscribe``
+    labels ``gateway/device/channel``: 2); 0 (the default), one device: the topic is
+    ``/tactile_record``, else ``/tactile_record/DEVICE``. ``out`` is an
     ``AtomicFile`` (the record appears whole at its commit) or a binary stream.
     ``compression``: ``zstd`` (the default: smallest, and what Foxglove and rosbag2 read),
     ``lz4`` or ``none``. ``start_ns``: the wall clock (ns since the Unix epoch) of
@@ -158,11 +161,13 @@ class McapRecordWriter:
         has_force: bool = False,
         has_temperature: bool = False,
         compression: Compression = "zstd",
+        device_levels: int = 0,
         start_ns: int | None = None,
         chunk_bytes: int = 1024 * 1024,
     ) -> None:
         self.has_force = has_force
         self.has_temperature = has_temperature
+        self._levels = device_levels
         self._start_ns = time.time_ns() if start_ns is None else start_ns
         stream = _Stream(out)
         self._mcap = Writer(
@@ -205,7 +210,7 @@ class McapRecordWriter:
             raise ValueError("this record has a force_n column: give force_n")
         if self.has_temperature and temperature_c is None:
             raise ValueError("this record has a temperature_c column: give temperature_c")
-        device = channel.rpartition("/")[0]
+        device = "/".join(channel.split("/", self._levels)[: self._levels]) if self._levels else ""
         t = float(time_s)
         if device != self._device or t != self._time_s or channel in self._seen:
             self.flush()

@@ -72,7 +72,9 @@ class LiveRecorder:
         self._writer: RecordWriter | McapRecordWriter
         if record_format == "mcap":
             binary = cast(AtomicFile | BinaryIO, out)
-            self._writer = McapRecordWriter(binary, metadata, has_force=force, has_temperature=temp)
+            self._writer = McapRecordWriter(
+                binary, metadata, has_force=force, has_temperature=temp, device_levels=int(self._multi)
+            )
         else:
             self._writer = RecordWriter(cast(TextIO, out), metadata, has_force=force, has_temperature=temp)
         self._writer.flush()

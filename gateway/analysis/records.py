@@ -517,11 +517,15 @@ def open_record_writer(
     *,
     has_force: bool = False,
     has_temperature: bool = False,
+    device_levels: int = 0,
 ) -> RecordWriter | McapRecordWriter:
     """The record writer of ``record_format`` (``RECORD_FORMATS``) into ``out``: both have
-    ``row``, ``flush`` and ``close``; call ``close`` before ``out.commit()``."""
+    ``row``, ``flush`` and ``close``; call ``close`` before ``out.commit()``. ``device_levels``:
+    how many leading ``/`` parts of a channel label name its device (MCAP: a topic each)."""
     if record_format == "mcap":
-        return McapRecordWriter(out, metadata, has_force=has_force, has_temperature=has_temperature)
+        return McapRecordWriter(
+            out, metadata, has_force=has_force, has_temperature=has_temperature, device_levels=device_levels
+        )
     if record_format != "csv":
         raise ValueError(f"record format {record_format!r}: one of {', '.join(RECORD_FORMATS)}")
     return RecordWriter(out.text, metadata, has_force=has_force, has_temperature=has_temperature)

@@ -69,8 +69,10 @@ class _Recorder:
     def __init__(self, path: Path, label_gateway: bool, label_device: bool, meta: dict[str, str]) -> None:
         self.path = path
         self.file = AtomicFile(path)
-        self.writer = open_record_writer(self.file, record_format_for(path), meta)  # x.mcap: MCAP
         self.label_gateway, self.label_device = label_gateway, label_device
+        # x.mcap: MCAP, a topic per gateway/device the labels name
+        levels = int(label_gateway) + int(label_device)
+        self.writer = open_record_writer(self.file, record_format_for(path), meta, device_levels=levels)
         self.t0: dict[tuple[str, str], float] = {}
         self.last: dict[tuple[str, str], float] = {}
         self.rows = 0

@@ -29,11 +29,13 @@ from gateway.atomic import AtomicFile
 Row = tuple[float, str, float, float | None, float | None]
 
 
-def _write(path: Path, fmt: str, rows: Sequence[Row], meta: dict[str, str], force: bool, temp: bool) -> None:
+def _write(
+    path: Path, fmt: str, rows: Sequence[Row], meta: dict[str, str], force: bool, temp: bool, levels: int = 0
+) -> None:
     with AtomicFile(path) as out:
         writer: RecordWriter | McapRecordWriter
         if fmt == "mcap":
-            writer = McapRecordWriter(out, meta, has_force=force, has_temperature=temp)
+            writer = McapRecordWriter(out, meta, has_force=force, has_temperature=temp, device_levels=levels)
         else:
             writer = RecordWriter(out.text, meta, has_force=force, has_temperature=temp)
         for row in rows:
@@ -68,7 +70,7 @@ def test_an_mcap_record_reads_back_as_the_csv_record_of_the_same_rows(tmp_path: 
     rows = _polls(20, ["left", "right"], 6)
     meta = {"source": "tactile-gateway record", "config": "hand.toml"}
     _write(tmp_path / "r.csv", "csv", rows, meta, True, True)
-    _write(tmp_path / "r.mcap", "mcap", rows, meta, True, True)
+    _write(tmp_path / "r.mcap", "mcap", rows, meta, True, True, levels=1)
     csv_rec, mcap_rec = read_record(tmp_path / "r.csv"), read_record(tmp_path / "r.mcap")
     assert (
         list(mcap_rec.channels)
@@ -86,7 +88,7 @@ def test_an_mcap_record_reads_back_as_the_csv_record_of_the_same_rows(tmp_path: 
 
 def test_the_file_is_standard_mcap_read_by_the_mcap_reader_and_the_ros2_decoder(tmp_path: Path) -> None:
     rows = _polls(12, ["left", "right"], 4)
-    _write(tmp_path / "r.mcap", "mcap", rows, {"source": "test"}, True, False)
+    _write(tmp_path / "r.mcap", "mcap", rows, {"source": "test"}, True, False, levels=1)
     with open(tmp_path / "r.mcap", "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == "ros2"
@@ -109,6 +111,32 @@ def test_the_file_is_standard_mcap_read_by_the_mcap_reader_and_the_ros2_decoder(
     t0 = decoded[0][2].log_time
     assert message.log_time - t0 == 33_300_000
     assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == message.log_time
+
+
+def test_one_message_per_poll_whatever_slashes_the_channel_names_hold(tmp_path: Path) -> None:
+    """A hand's taxels named region/taxel, regions interleaved: one device, one message a poll."""
+    regions = ["thumb/tip", "palm", "index/pad"]
+    rows: list[Row] = [
+        (0.1 * p, f"{regions[k % 3]}/t{k:02d}", 1000.0 + k, None, None) for p in range(5) for k in range(9)
+    ]
+    _write(tmp_path / "h.mcap", "mcap", rows, {}, False, False)
+    with open(tmp_path / "h.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert summary.statistics.message_count == 5
+    assert [c.topic for c in summary.channels.values()] == ["/tactile_record"]
+    assert list(read_record(tmp_path / "h.mcap").channels) == [name for _, name, *_ in rows[:9]]
+    # the devices of gateway/device/channel labels (subscribe's): a topic each
+    labelled: list[Row] = [(0.0, f"gw/{d}/c{k}", 5.0, None, None) for d in ("a", "b") for k in range(3)]
+    _write(tmp_path / "s.mcap", "mcap", labelled, {}, False, False, levels=2)
+    with open(tmp_path / "s.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert sorted(c.topic for c in summary.channels.values()) == [
+        "/tactile_record/gw/a",
+        "/tactile_record/gw/b",
+    ]
+    assert summary.statistics.message_count == 2
 
 
 finite_r = st.floats(min_value=1e-3, max_value=1e12, allow_nan=False)
