@@ -30,7 +30,9 @@ from ..model.conversion import Conversion
 from ..model.curves import CurveChannel, Drift
 from ..model.params import Interval
 from .layout import GridLayout
+from .limits import MAX_CHANNELS, MAX_PITCH_MM, MAX_POSITION_MM, PITCH_MM, POSITION_MM
 from .mqtt import MqttConfig
+from .regions import Region
 
 NO_CHECKS: Final = DeviceChecks()
 
@@ -43,6 +45,8 @@ __all__ = [
     "MAX_POSITION_MM",
     "NETWORK_KINDS",
     "PARITIES",
+    "PITCH_MM",
+    "POSITION_MM",
     "SERIAL_CLIENTS",
     "STANDARD_BAUDRATES",
     "BusConfig",
@@ -82,10 +86,6 @@ STANDARD_BAUDRATES: Final = (
 PARITIES: Final = ("N", "E", "O")
 #: Who frames Modbus RTU on a serial line (``SerialClient``).
 SERIAL_CLIENTS: Final = tuple(SerialClient)
-MAX_CHANNELS: Final = 256
-#: Channel positions must lie within this many millimetres of the origin.
-MAX_POSITION_MM: Final = 10_000.0
-MAX_PITCH_MM: Final = 1_000.0
 
 # The allowed values of the fields, shared by the dataclasses' own checks and the parser.
 DEVICE_ID: Final = (1, 247)
@@ -98,8 +98,6 @@ TIMEOUT_S: Final = Interval(0.0, 60.0, low_inclusive=False)
 POLL_INTERVAL_S: Final = Interval(0.0, 3600.0, low_inclusive=True)
 BACKOFF_INITIAL_S: Final = Interval(0.0, 60.0, low_inclusive=False)
 BACKOFF_MAX_S: Final = 3600.0
-POSITION_MM: Final = Interval(-MAX_POSITION_MM, MAX_POSITION_MM, low_inclusive=True)
-PITCH_MM: Final = Interval(0.0, MAX_PITCH_MM, low_inclusive=False)
 
 
 def check_integer(where: str, name: str, value: object, low: int, high: int, unit: str = "") -> None:
@@ -236,6 +234,9 @@ class DeviceConfig:
     profile: str | None = None
     #: drift correction on top of the device's own force or pressure output (None: passed through)
     output_drift: Drift | None = None
+    #: the named sub-grids the channels come from, in channel order (``regions.Region``);
+    #: () for a device whose channels are the one grid of ``layout``
+    regions: tuple[Region, ...] = ()
 
     def __post_init__(self) -> None:
         where = f"device {self.name!r}"
@@ -273,6 +274,16 @@ class DeviceConfig:
             if channel.name in names:
                 raise ConfigError(f"{where}: duplicate channel name {channel.name!r}")
             names.add(channel.name)
+        first = 0
+        for region in self.regions:
+            if region.first_channel != first:
+                raise ConfigError(
+                    f"{where}: region {region.name!r} starts at channel {region.first_channel}, "
+                    f"expected {first} (the regions hold the channels in order)"
+                )
+            first += region.n_channels
+        if self.regions and first != self.n_channels:
+            raise ConfigError(f"{where}: the regions hold {first} channels for channels = {self.n_channels}")
 
     @property
     def columns(self) -> int:

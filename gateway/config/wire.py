@@ -32,6 +32,7 @@ from ..modbus.register_map import (
 )
 from ..modbus.vendor_fc import VendorRead
 from ..model.params import Interval
+from .regions import RegionSet
 from .schema import DeviceConfig
 from .tables import REQUIRED, Context, Table, join_key, show_value, type_name
 
@@ -142,12 +143,14 @@ def parse_registers(
     )
 
 
-def parse_frame(table: Table, n: int, max_read: int) -> ValueFrame | None:
+def parse_frame(table: Table, n: int, max_read: int, regions: RegionSet | None = None) -> ValueFrame | None:
     """``[bus.device.frame]``: the channel values' own layout, or None when absent.
 
     ``address`` + ``values`` (default: every channel) is a one-block frame; ``blocks`` lists
-    several, each the next channels in order."""
-    if not table.data:
+    several, each the next channels in order. A device made of ``regions`` has one block per
+    region, ``regions.value_stride`` registers from value to value (the table, which may then
+    be absent, says only what the values are and where they are read)."""
+    if not table.data and regions is None:
         return None
     quantity = table.choice("quantity", "counts", tuple(FRAME_QUANTITIES))
     unit = table.choice("unit", _DEFAULT_UNITS[quantity], tuple(FRAME_QUANTITIES[quantity]))
@@ -185,7 +188,16 @@ def parse_frame(table: Table, n: int, max_read: int) -> ValueFrame | None:
     width = FRAME_TYPE_WIDTHS[value_type]
     row_select = table.optional_address("row_select_address", None, MAX_ADDRESS)
     blocks: list[FrameBlock] = []
-    if table.has("blocks"):
+    if regions is not None:
+        for key in ("address", "values", "blocks", "row_select_address"):
+            if table.has(key):
+                raise table.error(
+                    key, "the regions say where the values are ([[bus.device.region]] address); drop this key"
+                )
+        if vendor is not None and regions.value_stride != width:
+            raise table.error("table", "a vendor read answers its values back to back: no value_stride")
+        blocks.extend(regions.blocks())
+    elif table.has("blocks"):
         for key in ("address", "values"):
             if table.has(key):
                 raise table.error(key, "give address and values, or blocks, not both")
@@ -212,7 +224,17 @@ def parse_frame(table: Table, n: int, max_read: int) -> ValueFrame | None:
         raise table.error("blocks", "with row_select_address every block names its row (row = 0, 1, ...)")
     try:
         return ValueFrame(
-            quantity, unit, value_type, order, scale, offset, source, tuple(blocks), vendor, row_select
+            quantity,
+            unit,
+            value_type,
+            order,
+            scale,
+            offset,
+            source,
+            tuple(blocks),
+            vendor,
+            row_select,
+            0 if regions is None or regions.value_stride == width else regions.value_stride,
         )
     except ConfigError as exc:
         raise table.ctx.error(table.path, str(exc)) from None

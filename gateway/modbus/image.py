@@ -108,6 +108,12 @@ class RawSample:
     output_pressure_kpa: FloatArray | None = None
 
 
+def _strided_index(values: int, stride: int, width: int) -> NDArray[np.intp]:
+    """The positions of ``values`` values of ``width`` registers, ``stride`` registers apart."""
+    starts = np.arange(values, dtype=np.intp) * stride
+    return (starts[:, None] + np.arange(width, dtype=np.intp)[None, :]).reshape(-1)
+
+
 def decode_frame(frame: ValueFrame, image: RegisterImage) -> NDArray[np.uint16] | FloatArray:
     """A frame's values in its quantity's base unit (counts, ohm, N or kPa), channel by
     channel over its blocks. Plain 16-bit counts (uint16, big bytes, no scaling) stay uint16
@@ -118,11 +124,10 @@ def decode_frame(frame: ValueFrame, image: RegisterImage) -> NDArray[np.uint16] 
     parts: list[Any] = []
     for k, b in enumerate(frame.blocks):
         words = image.require(
-            frame_space(frame.table, frame.vendor, b.row),
-            b.address,
-            b.values * frame.width,
-            f"frame block {k}",
+            frame_space(frame.table, frame.vendor, b.row), b.address, frame.span(b), f"frame block {k}"
         )
+        if frame.value_stride != frame.width:  # each value's registers, the rest skipped
+            words = words.reshape(-1)[_strided_index(b.values, frame.value_stride, frame.width)]
         parts.append(
             words if plain else decode_values(words, frame.value_type, frame.order, frame.scale, frame.offset)
         )

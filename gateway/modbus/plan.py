@@ -93,10 +93,10 @@ def read_plan(
     for kind in (RegisterKind.HOLDING, RegisterKind.INPUT):
         # Every value of every block as (start, registers, purpose), in address order.
         units = sorted(
-            (b.address + k * b.value_registers, b.value_registers, b.purpose)
+            (b.address + k * b.value_stride, b.value_registers, b.purpose)
             for b in blocks
             if b.kind == kind
-            for k in range(b.count // b.value_registers)
+            for k in range(b.n_values)
         )
         start = end = -1
         purposes: list[str] = []

@@ -41,6 +41,7 @@ __all__ = [
     "IDENTIFICATION_FIELDS",
     "MAX_ADDRESS",
     "MAX_READ_REGISTERS",
+    "MAX_VALUE_STRIDE",
     "MAX_WRITE_REGISTERS",
     "REGISTER_TABLES",
     "STATUS_BITMAPS",
@@ -137,6 +138,8 @@ STATUS_BITMAPS: Final = ("open", "short", "saturated")
 MAX_ADDRESS: Final = 65535
 #: Most registers one read may ask for (Modbus application protocol, functions 3 and 4).
 MAX_READ_REGISTERS: Final = 125
+#: Most registers from one frame value to the next (``ValueFrame.stride``).
+MAX_VALUE_STRIDE: Final = 64
 #: Most registers one write may carry (function 16).
 MAX_WRITE_REGISTERS: Final = 123
 #: The simulator's device clock (input registers 2-5, uint64 ms; docs/register-map.md).
@@ -292,6 +295,8 @@ class ValueFrame:
     blocks: tuple[FrameBlock, ...]
     vendor: VendorRead | None = None
     row_select_address: int | None = None
+    #: registers from one value to the next (0: the value's width, values back to back)
+    stride: int = 0
 
     def __post_init__(self) -> None:
         units = FRAME_QUANTITIES.get(self.quantity)
@@ -324,13 +329,33 @@ class ValueFrame:
             raise ConfigError("frame: blocks: with row_select_address every block names its row")
         if self.row_select_address is None and any(rows):
             raise ConfigError("frame: blocks: a block names a row but the frame has no row_select_address")
+        if self.value_type in FRAME_TYPE_WIDTHS and (
+            isinstance(self.stride, bool)
+            or not isinstance(self.stride, int)
+            or not (self.stride == 0 or self.width <= self.stride <= MAX_VALUE_STRIDE)
+        ):
+            raise ConfigError(
+                f"frame: stride: {self.stride!r} is out of range; allowed: 0 (values back to back) or "
+                f"{self.width}..{MAX_VALUE_STRIDE} registers"
+            )
+        if self.vendor is not None and self.value_stride != self.width:
+            raise ConfigError("frame: stride: a vendor read answers its values back to back")
         for b in self.blocks:
-            _check_address("frame block", "address", b.address, 1 if self.vendor else b.values * self.width)
+            _check_address("frame block", "address", b.address, 1 if self.vendor else self.span(b))
 
     @property
     def width(self) -> int:
         """Registers per value."""
         return FRAME_TYPE_WIDTHS[self.value_type]
+
+    @property
+    def value_stride(self) -> int:
+        """Registers from the start of one value to the start of the next."""
+        return self.stride or self.width
+
+    def span(self, block: FrameBlock) -> int:
+        """Registers from a block's first value to the end of its last."""
+        return (block.values - 1) * self.value_stride + self.width
 
     @property
     def n_values(self) -> int:
@@ -347,13 +372,16 @@ class ValueFrame:
             f"vendor function {self.vendor.function_code:#04x}" if self.vendor else f"{self.table} registers"
         )
         spans = ", ".join(
-            f"{b.address}+{b.values * (1 if self.vendor else self.width)}"
+            f"{b.address}+{b.values if self.vendor else self.span(b)}"
             + ("" if b.row is None else f" (row {b.row})")
             for b in self.blocks
         )
         scaled = "" if (self.scale, self.offset) == (1.0, 0.0) else f" x {self.scale:g} + {self.offset:g}"
         what = "ADC counts" if self.quantity is FrameQuantity.COUNTS else f"{self.quantity} in {self.unit}"
-        return f"{what}, {self.value_type} {self.order}{scaled}, {where}: {spans}"
+        strided = (
+            "" if self.value_stride == self.width else f", one value every {self.value_stride} registers"
+        )
+        return f"{what}, {self.value_type} {self.order}{scaled}{strided}, {where}: {spans}"
 
 
 #: The register space a block is read from, as the poll's register image names it: a
@@ -486,10 +514,20 @@ class RegisterBlock:
     address: int
     count: int
     value_registers: int
+    #: registers from one value to the next (0: ``value_registers``, values back to back)
+    stride: int = 0
 
     @property
     def end(self) -> int:
         return self.address + self.count - 1
+
+    @property
+    def value_stride(self) -> int:
+        return self.stride or self.value_registers
+
+    @property
+    def n_values(self) -> int:
+        return (self.count - self.value_registers) // self.value_stride + 1
 
 
 def status_registers(n_channels: int) -> int:
@@ -521,8 +559,9 @@ def register_blocks(device: DeviceLayout, clock: bool = True) -> tuple[RegisterB
         f = regs.frame
         for k, b in enumerate(f.blocks):
             space = frame_space(f.table, f.vendor, b.row)
-            count = b.values * f.width
-            blocks.append(RegisterBlock(f"frame{k}", "frame", space, b.address, count, f.width))
+            count = f.span(b)
+            stride = 0 if f.value_stride == f.width else f.value_stride
+            blocks.append(RegisterBlock(f"frame{k}", "frame", space, b.address, count, f.width, stride))
     elif device.encoding is Encoding.ADC:
         blocks.append(RegisterBlock("adc", "adc", table, regs.adc_address, n, 1))
     elif device.encoding is Encoding.FLOAT32:

@@ -116,12 +116,12 @@ def test_check_config_rtu_bus_line(tmp_path: Path) -> None:
 
 
 def test_check_config_invalid_exits_2_with_the_message_on_stderr(config_file: Path) -> None:
-    config_file.write_text(CONFIG.replace("channels = 16", "channels = 300"))
+    config_file.write_text(CONFIG.replace("channels = 16", "channels = 3000"))
     result = run("check-config", "-c", str(config_file))
     assert result.exit_code == 2
     assert result.stdout == ""
     assert result.stderr.strip() == (
-        f"{config_file}: bus[0].device[0].channels: 300 is out of range; allowed: 1..256"
+        f"{config_file}: bus[0].device[0].channels: 3000 is out of range; allowed: 1..2048"
     )
     assert "Traceback" not in result.output
 

@@ -243,12 +243,12 @@ BAD_CONFIGS: list[tuple[str, str, tuple[str, ...]]] = [
     (
         "channels-zero",
         replaced("channels = 16", "channels = 0"),
-        ("bus[0].device[0].channels: 0", "allowed: 1..256"),
+        ("bus[0].device[0].channels: 0", "allowed: 1..2048"),
     ),
     (
         "channels-big",
-        replaced("channels = 16", "channels = 257"),
-        ("bus[0].device[0].channels: 257", "1..256"),
+        replaced("channels = 16", "channels = 2049"),
+        ("bus[0].device[0].channels: 2049", "1..2048"),
     ),
     (
         "channels-missing",
