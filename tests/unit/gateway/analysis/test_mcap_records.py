@@ -22,9 +22,15 @@ from mcap_ros2.decoder import DecoderFactory
 
 from gateway.analysis import records as records_module
 from gateway.analysis.mcap_records import MCAP_MAGIC, SCHEMA_NAME, McapRecordWriter
-from gateway.analysis.recorder import is_record_file, record_path_ok
+from gateway.analysis.recorder import LiveRecorder, is_record_file, record_path_ok
 from gateway.analysis.records import Record, RecordError, RecordWriter, read_record
 from gateway.atomic import AtomicFile
+from gateway.config import ChannelConfig, DeviceConfig, RegisterMap, bus_config_for, gateway_config_for
+from gateway.config.layout import GridLayout
+from gateway.modbus.image import RawSample
+from gateway.model import PAPER_EFFECTS, Divider, SensorParams
+from gateway.runtime.processor import DeviceProcessor
+from gateway.runtime.snapshot import GatewaySnapshot
 
 Row = tuple[float, str, float, float | None, float | None]
 
@@ -336,3 +342,61 @@ def test_an_mcap_record_counts_as_a_record_that_out_may_replace(tmp_path: Path) 
     with pytest.raises(ValueError, match="not a record"):
         record_path_ok(other, replace_record=True)
     assert struct.pack("<8B", 137, 77, 67, 65, 80, 48, 13, 10) == MCAP_MAGIC
+
+
+def test_a_live_record_of_two_devices_has_a_topic_per_device(tmp_path: Path) -> None:
+    """The live recorder labels device/channel; the MCAP form puts each device on its topic and
+    reads back as the CSV form of the same snapshots."""
+
+    def device(name: str, unit: int) -> DeviceConfig:
+        channels = tuple(
+            ChannelConfig(k, f"ch{k:02d}", 2.5 * k, 0.0, True, PAPER_EFFECTS, SensorParams(), None, None)
+            for k in range(3)
+        )
+        return DeviceConfig(
+            name,
+            unit,
+            "float32",
+            3,
+            RegisterMap(),
+            Divider(),
+            channels,
+            False,
+            GridLayout(3, 3, 2.5, 2.5),
+            None,
+        )
+
+    devices = [device("left", 1), device("right", 2)]
+    config = gateway_config_for([bus_config_for("b", "tcp", devices, host="127.0.0.1", port=5020)])
+    procs = [DeviceProcessor(d, "b", 0.1) for d in devices]
+    states = [p.initial_state() for p in procs]
+    paths = [tmp_path / "two.csv", tmp_path / "two.mcap"]
+    files = [AtomicFile(p) for p in paths]
+    recorders = [
+        LiveRecorder(files[0].text, config),
+        LiveRecorder(files[1], config, record_format="mcap"),
+    ]
+    for poll in range(4):
+        snaps = {}
+        for d, proc in enumerate(procs):
+            r = np.array([2e4 + 100.0 * poll + 10.0 * d, 3e4, 4e4 + poll])
+            sample = RawSample(resistance_ohm=r, device_time_s=5.0 + 0.5 * poll)
+            snap, states[d] = proc.process(states[d], sample, 1e9 + poll, 0.0)
+            snaps[devices[d].name] = snap
+        for recorder in recorders:
+            recorder(GatewaySnapshot.build(snaps, {}, poll + 1))
+    for recorder, out in zip(recorders, files, strict=True):
+        recorder.close()
+        out.commit()
+    csv_rec, mcap_rec = (read_record(p) for p in paths)
+    assert _table(mcap_rec) == _table(csv_rec)
+    assert list(mcap_rec.channels) == [f"{d}/ch{k:02d}" for d in ("left", "right") for k in range(3)]
+    assert _table(mcap_rec)["right/ch00"][2] == (1.0, 2e4 + 200.0 + 10.0)  # hand-computed: poll 2, right
+    with open(paths[1], "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    assert sorted(c.topic for c in summary.channels.values()) == [
+        "/tactile_record/left",
+        "/tactile_record/right",
+    ]
+    assert summary.statistics.message_count == 8  # 4 polls x 2 devices
