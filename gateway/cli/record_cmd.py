@@ -143,6 +143,11 @@ def record(
     Exit status 1 when no sample was recorded (every device down), 2 for bad arguments."""
     try:
         config = load_config(config_path)
+        if record_format == "csv" and record_format_for(out_path) == "mcap":
+            raise ValueError(
+                f"--format csv into {out_path}: a record named .mcap is read as MCAP; name it .csv, "
+                "or write MCAP (--format mcap)"
+            )
         record_path_ok(out_path, force=overwrite, replace_record=True)
     except (ConfigError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None

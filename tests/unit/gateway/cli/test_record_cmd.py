@@ -59,3 +59,14 @@ def test_record_says_which_channels_start_loaded(tmp_path: Path) -> None:
     lines = _loaded_starts(path)
     assert len(lines) == 1 and "channel tip" in lines[0] and "starts loaded at 10 N" in lines[0], lines
     assert _loaded_starts(tmp_path / "missing.csv") == []
+
+
+def test_a_csv_record_named_mcap_is_refused(tmp_path: Path) -> None:
+    """A .mcap name is read as MCAP by its magic: a CSV written there would not read back."""
+    out = tmp_path / "run.mcap"
+    result = CliRunner().invoke(
+        main,
+        ["record", "-c", str(_config(tmp_path)), "--duration", "0", "--out", str(out), "--format", "csv"],
+    )
+    assert result.exit_code == 2 and "--format csv" in result.output and ".mcap" in result.output
+    assert not out.exists()
