@@ -49,9 +49,9 @@ def _config(tmp_path: Path, sim_port: int, broker_port: int, encoding: str) -> P
     path.write_text(
         f'[metrics]\naddress = "127.0.0.1:{free_port()}"\n\n'
         f'[mqtt]\nhost = "127.0.0.1"\nport = {broker_port}\ngateway = "gw1"\ntopic_prefix = "lab/tactile"\n'
-        f'encoding = "{encoding}"\nmax_batch_frames = 10\nbatch_interval_s = 0.02\n\n'
+        f'encoding = "{encoding}"\nmax_batch_frames = 10\nbatch_interval_s = 0.1\n\n'
         f'[[bus]]\nname = "sim"\nkind = "tcp"\nhost = "127.0.0.1"\nport = {sim_port}\n'
-        "poll_interval_s = 0\n\n"  # back to back: frames wait, and go out in batches
+        "poll_interval_s = 0\n\n"  # back to back: frames wait (up to 0.1 s), and go out in batches
         '[[bus.device]]\nname = "arr"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 4\ncolumns = 2\n'
     )
     return path
