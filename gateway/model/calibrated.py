@@ -33,9 +33,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .drift import DRIFT_KEYS, Drift
+from .frontend_base import FrontEnd
 from .static_curves import (
     CURVE_KEYS,
     CURVE_KINDS,
+    CountsLookupCurve,
     CurveError,
     LineCurve,
     LookupCurve,
@@ -66,7 +68,7 @@ ZERO_FORCE_N = 1e-9
 LINE_ZERO_MARGIN = 1.1
 _COMMON_KEYS = ("kind", "gain", "offset_n", "force_min_n", "force_max_n", "held_out_force_rms_n")
 _LINE_KEYS = ("slope_s_per_n", "intercept_s", "force_min_n", "force_max_n", "held_out_force_rms_n")
-_LOOKUP_KEYS = ("resistance_ohm", "force_n", "held_out_force_rms_n")
+_LOOKUP_KEYS = ("resistance_ohm", "counts", "force_n", "held_out_force_rms_n")
 
 
 @dataclass(frozen=True)
@@ -127,18 +129,24 @@ class CurveChannel:
         curve = self.curve
         if isinstance(curve, LineCurve):
             return max(float(curve.conductance(target)), 0.0)
-        if not isinstance(curve, LookupCurve):
+        if not isinstance(curve, LookupCurve | CountsLookupCurve):
             return 0.0 if target <= 0.0 else float(1.0 / curve.resistance(target))
-        log_r = np.log(np.asarray(curve.resistance_ohm))
-        f = np.asarray(curve.force_n) - target
+        # along the table's own abscissa (ln R, or a counts table's signed code), increasing with R
+        u = np.asarray(curve.knot_abscissa())
+        f = np.asarray(curve.force_n if isinstance(curve, LookupCurve) else curve._knot_forces()) - target
         if f[0] <= 0.0:  # never above 0 N: every reading is no contact
-            return float(np.exp(-log_r[0]))
-        if f[-1] > 0.0:  # on the last sloped segment extended in ln R
+            at = float(u[0])
+        elif f[-1] > 0.0:  # on the last sloped segment extended along the abscissa
             k = int(np.flatnonzero(f > f[-1])[-1])
-            return float(np.exp(-(log_r[-1] + f[-1] * (log_r[-1] - log_r[k]) / (f[k] - f[-1]))))
-        j = int(np.flatnonzero(f <= 0.0)[0])
-        t = f[j - 1] / (f[j - 1] - f[j])
-        return float(np.exp(-(log_r[j - 1] + t * (log_r[j] - log_r[j - 1]))))
+            at = float(u[-1] + f[-1] * (u[-1] - u[k]) / (f[k] - f[-1]))
+        else:
+            j = int(np.flatnonzero(f <= 0.0)[0])
+            t = f[j - 1] / (f[j - 1] - f[j])
+            at = float(u[j - 1] + t * (u[j] - u[j - 1]))
+        if isinstance(curve, LookupCurve):
+            return float(np.exp(-at))
+        r = curve.resistance_at(at)
+        return 1.0 / r if r > 0.0 else math.inf
 
     def static_force(self, resistance_ohm: ArrayLike) -> FloatArray:
         """The apparent force x = curve(R / gain) + offset_n (N), before any drift correction;
@@ -207,16 +215,18 @@ def _number(data: Mapping[str, object], key: str, default: float, unit: str) -> 
     return finite_value(key, value, unit)
 
 
-def curve_from_table(data: Mapping[str, object]) -> CurveChannel:
-    """A channel from a ``[curve.<name>]`` table; ``CurveError`` names the key at fault."""
+def curve_from_table(data: Mapping[str, object], front_end: FrontEnd | None = None) -> CurveChannel:
+    """A channel from a ``[curve.<name>]`` table (a lookup in counts read through
+    ``front_end``); ``CurveError`` names the key at fault."""
     kind = data.get("kind")
     if kind not in CURVE_KINDS:
         raise CurveError("kind", f"{kind!r} is not a curve kind; allowed: {', '.join(CURVE_KINDS)}")
     assert isinstance(kind, str)
-    _check_keys(data, _COMMON_KEYS + CURVE_KEYS[kind] + DRIFT_KEYS, f" for a {kind} curve")
+    counts = ("counts",) if kind == "lookup" else ()
+    _check_keys(data, _COMMON_KEYS + CURVE_KEYS[kind] + counts + DRIFT_KEYS, f" for a {kind} curve")
     drift_values = {k: finite_value(k, data[k], "") for k in DRIFT_KEYS if k in data}
     return CurveChannel(
-        curve_body_from_table(kind, data),
+        curve_body_from_table(kind, data, front_end),
         Drift(**drift_values),
         gain=_number(data, "gain", 1.0, ""),
         offset_n=_number(data, "offset_n", 0.0, "N"),
@@ -226,14 +236,20 @@ def curve_from_table(data: Mapping[str, object]) -> CurveChannel:
 
 
 def channel_from_table(
-    kind: str, data: Mapping[str, object], force_min_n: float, force_max_n: float
+    kind: str,
+    data: Mapping[str, object],
+    force_min_n: float,
+    force_max_n: float,
+    front_end: FrontEnd | None = None,
 ) -> CurveChannel:
     """The channel of a calibration file's ``[line.<name>]``, ``[lookup.<name>]`` or
     ``[curve.<name>]`` table; a line without its own force range takes the channel's
     (``force_min_n``/``force_max_n``), a lookup is calibrated over its knots' forces (never
-    below 0 N). ``CurveError`` names the key."""
+    below 0 N) and read in the domain it was given in: ``resistance_ohm`` in ln R (what
+    ``calibrate`` writes), ``counts`` in the ADC code of ``front_end`` (the device's; None: a
+    device without one, where a table in counts is refused). ``CurveError`` names the key."""
     if kind == "curve":
-        return curve_from_table(data)
+        return curve_from_table(data, front_end)
     if kind == "line":
         _check_keys(data, _LINE_KEYS, "")
         curve: StaticCurve = curve_body_from_table("line", data)
@@ -244,8 +260,8 @@ def channel_from_table(
         return CurveChannel(curve, force_min_n=low, force_max_n=high, table_kind="line")
     if kind == "lookup":
         _check_keys(data, _LOOKUP_KEYS, "")
-        lookup = curve_body_from_table("lookup", data)
-        assert isinstance(lookup, LookupCurve)
+        lookup = curve_body_from_table("lookup", data, front_end)
+        assert isinstance(lookup, LookupCurve | CountsLookupCurve)
         low_n, high_n = max(min(lookup.force_n), 0.0), max(lookup.force_n)
         return CurveChannel(lookup, force_min_n=low_n, force_max_n=high_n, table_kind="lookup")
     raise CurveError("kind", f"{kind!r} is not a calibration table; allowed: {', '.join(CONVERSION_KINDS)}")

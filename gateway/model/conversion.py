@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from .calibrated import CONVERSION_KINDS, ZERO_FORCE_N, CurveChannel, channel_from_table
+from .frontend_base import FrontEnd
 from .static_curves import CurveError
 
 __all__ = [
@@ -32,12 +33,17 @@ Conversion = CurveChannel
 
 
 def conversion_from_table(
-    kind: str, data: Mapping[str, object], force_min_n: float, force_max_n: float
+    kind: str,
+    data: Mapping[str, object],
+    force_min_n: float,
+    force_max_n: float,
+    front_end: FrontEnd | None = None,
 ) -> CurveChannel:
     """The channel of a calibration file's ``[line]``, ``[lookup]`` or ``[curve]`` table; a
-    line without its own force range takes the channel's (``force_min_n``/``force_max_n``).
-    ``ConversionError`` names the key."""
-    return channel_from_table(kind, data, force_min_n, force_max_n)
+    line without its own force range takes the channel's (``force_min_n``/``force_max_n``); a
+    lookup is read in the domain it was given in (``resistance_ohm``: ln R; ``counts``: the
+    code of ``front_end``, the device's ADC front end). ``ConversionError`` names the key."""
+    return channel_from_table(kind, data, force_min_n, force_max_n, front_end)
 
 
 def line_conversion(
@@ -58,7 +64,7 @@ def line_conversion(
 
 
 def lookup_conversion(resistance_ohm: tuple[float, ...], force_n: tuple[float, ...]) -> CurveChannel:
-    """A ``[lookup]`` table's channel: F against ln R through the knots."""
+    """A ``[lookup]`` table in ``resistance_ohm``: F against ln R through the knots."""
     return channel_from_table(
         "lookup", {"resistance_ohm": list(resistance_ohm), "force_n": list(force_n)}, 0.0, 0.0
     )

@@ -11,7 +11,10 @@ evaluation and its table (lmfit keeps ``dumps``/``loads`` beside the model):
 * ``LookupCurve``: a monotone table, x by linear interpolation in ln R between knots
   (resistance increasing, force non-increasing), extended beyond its ends along its end
   segments (``KnotTable``), fitted through the medians of equal-count bins made monotone by
-  pooling adjacent violators (``fit``).
+  pooling adjacent violators (``fit``);
+* ``CountsLookupCurve``: a monotone table given in ADC counts (a vendor's table), x by linear
+  interpolation in the exact code of the device's front end between knots: a table is read
+  in the domain it was given in.
 
 Each curve reports its *zero-conductance force* ``force_at_zero_conductance_n``: what it reads
 for a sensor whose conductance tends to 0 S (nearly open). A line with c < 0 reads -c/m > 0
@@ -28,9 +31,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .frontend_base import FrontEnd
+
 __all__ = [
     "CURVE_KINDS",
     "LOOKUP_KNOTS",
+    "CountsLookupCurve",
     "CurveError",
     "KnotTable",
     "LineCurve",
@@ -228,8 +234,22 @@ class LookupCurve:
         r = np.asarray(resistance_ohm, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             x = np.where(r > 0.0, np.log(np.where(r > 0.0, r, 1.0)), np.nan).reshape(-1)
-        table = KnotTable([(self.resistance_ohm, self.force_n)])
+        table = KnotTable([(self.knot_abscissa(), self.force_n)])
         return table.force(x, np.zeros(x.size, dtype=np.intp)).reshape(r.shape)
+
+    def knot_abscissa(self) -> tuple[float, ...]:
+        """The knots where the table is linear: ln R (increasing; numpy's log, as ever)."""
+        return tuple(np.log(np.asarray(self.resistance_ohm, dtype=np.float64)).tolist())
+
+    def abscissa(self, resistance_ohm: FloatArray) -> FloatArray:
+        """ln R of readings (ohm; NaN where R is not > 0)."""
+        r = np.asarray(resistance_ohm, dtype=np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.asarray(np.where(r > 0.0, np.log(np.where(r > 0.0, r, 1.0)), np.nan))
+
+    def resistance_at(self, abscissa: float) -> float:
+        """The resistance (ohm) at a point of the abscissa (ln R)."""
+        return math.exp(abscissa)
 
     def resistance(self, force_n: ArrayLike) -> FloatArray:
         f = np.asarray(force_n, dtype=np.float64)
@@ -276,6 +296,108 @@ class LookupCurve:
         return cls(tuple(float(math.exp(v)) for v in x), tuple(float(v) for v in y))
 
 
+@dataclass(frozen=True)
+class CountsLookupCurve:
+    """x against the ADC code through knots ``(counts[i], force_n[i])`` given in counts (a
+    vendor's table), linear in the code between them, and beyond the ends along the end
+    segments (``KnotTable``). A reading R (ohm, or r / R_ref for a ratio front end) is read at
+    its exact, unrounded code ``x(R) = offset + V(R) / V_ref FS`` of ``front_end``; counts
+    strictly increasing within [0, FS], forces monotone the way the front end's counts go with
+    load (rising counts: non-decreasing forces)."""
+
+    counts: tuple[float, ...]
+    force_n: tuple[float, ...]
+    front_end: FrontEnd
+    kind: str = field(default="lookup", init=False)
+
+    def __post_init__(self) -> None:
+        for key, values in (("counts", self.counts), ("force_n", self.force_n)):
+            if not isinstance(values, tuple) or len(values) < 2:
+                raise CurveError(key, f"expected at least 2 points, got {values!r}")
+        if len(self.counts) != len(self.force_n):
+            raise CurveError(
+                "force_n", f"{len(self.force_n)} forces for {len(self.counts)} counts; one per count"
+            )
+        c = [finite_value(f"counts[{i}]", v, "counts") for i, v in enumerate(self.counts)]
+        f = [finite_value(f"force_n[{i}]", v, "N") for i, v in enumerate(self.force_n)]
+        fs = self.front_end.full_scale
+        rising = self.rises_with_load
+        for i in range(len(c)):
+            if not 0.0 <= c[i] <= fs:
+                raise CurveError(f"counts[{i}]", f"{c[i]!r} is out of range; allowed: [0, {fs}] counts")
+            if i and not c[i] > c[i - 1]:
+                raise CurveError(
+                    f"counts[{i}]", f"{c[i]!r} after {c[i - 1]!r}: counts must be strictly increasing"
+                )
+            if i and (f[i] < f[i - 1] if rising else f[i] > f[i - 1]):
+                way = "rise" if rising else "fall"
+                must = "not decrease" if rising else "not increase"
+                raise CurveError(
+                    f"force_n[{i}]",
+                    f"{f[i]!r} after {f[i - 1]!r}: this front end's counts {way} with load, so forces "
+                    f"must {must} with counts",
+                )
+        if f[0] == f[-1]:
+            raise CurveError("force_n", f"all forces are {f[0]!r}: the lookup needs a force range")
+
+    @property
+    def rises_with_load(self) -> bool:
+        """Whether the code rises as the resistance falls (under load): the open sensor's code
+        lies below the shorted one's."""
+        x_open, x_short = self.front_end._code_edges()
+        return bool(x_open < x_short)
+
+    @property
+    def _sign(self) -> float:
+        """The abscissa is sign x code, so that it increases with the resistance."""
+        return -1.0 if self.rises_with_load else 1.0
+
+    def knot_abscissa(self) -> tuple[float, ...]:
+        """The knots where the table is linear, as signed codes increasing with R."""
+        u = [self._sign * v for v in self.counts]
+        return tuple(u if u[0] < u[-1] else u[::-1])
+
+    def _knot_forces(self) -> tuple[float, ...]:
+        return self.force_n if self._sign > 0.0 else self.force_n[::-1]
+
+    def abscissa(self, resistance_ohm: FloatArray) -> FloatArray:
+        """The signed exact code of readings (NaN where R is NaN or negative)."""
+        r = np.asarray(resistance_ohm, dtype=np.float64)
+        fe = self.front_end
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            x = fe.output_voltage(r) / fe.reference_v * fe.full_scale + fe.adc_offset_counts
+        return np.asarray(self._sign * x)
+
+    def resistance_at(self, abscissa: float) -> float:
+        """The resistance at a signed code (the front end's inverse; +inf at the open code)."""
+        r, _ = self.front_end.resistance(np.array([self._sign * abscissa]))
+        return float(r[0])
+
+    def force(self, resistance_ohm: ArrayLike) -> FloatArray:
+        """x by the table at the readings' exact codes."""
+        r = np.asarray(resistance_ohm, dtype=np.float64)
+        u = self.abscissa(r).reshape(-1)
+        table = KnotTable([(self.knot_abscissa(), self._knot_forces())])
+        return table.force(u, np.zeros(u.size, dtype=np.intp)).reshape(r.shape)
+
+    def resistance(self, force_n: ArrayLike) -> FloatArray:
+        f = np.asarray(force_n, dtype=np.float64)
+        u = np.interp(f, np.asarray(self._knot_forces())[::-1], np.asarray(self.knot_abscissa())[::-1])
+        return np.asarray(np.vectorize(self.resistance_at, otypes=[np.float64])(u))
+
+    @property
+    def force_at_zero_conductance_n(self) -> float:
+        """What the table reads at the open sensor's code (N)."""
+        return float(self.force(np.array([math.inf]))[0])
+
+    def table(self) -> dict[str, list[float]]:
+        return {"counts": [float(v) for v in self.counts], "force_n": [float(v) for v in self.force_n]}
+
+    @property
+    def n_parameters(self) -> int:
+        return 2 * len(self.force_n)
+
+
 def _pav_non_increasing(xs: list[float], ys: list[float], ws: list[float]) -> tuple[list[float], list[float]]:
     """Pool adjacent violators so that y does not increase with x (x pooled the same way)."""
     blocks: list[list[float]] = []  # [sum w x, sum w y, sum w]
@@ -298,7 +420,7 @@ def _loaded_rows(force_n: ArrayLike, resistance_ohm: ArrayLike) -> tuple[FloatAr
     return f[ok], r[ok]
 
 
-StaticCurve = PowerLawCurve | LineCurve | LookupCurve
+StaticCurve = PowerLawCurve | LineCurve | LookupCurve | CountsLookupCurve
 
 #: Each curve kind's own keys in a calibration table.
 CURVE_KEYS: dict[str, tuple[str, ...]] = {
@@ -308,9 +430,25 @@ CURVE_KEYS: dict[str, tuple[str, ...]] = {
 }
 
 
-def curve_body_from_table(kind: str, data: Mapping[str, object]) -> StaticCurve:
-    """The static curve of ``kind`` from a calibration table's keys (``CURVE_KEYS[kind]``);
-    ``CurveError`` names a missing or bad key."""
+def curve_body_from_table(
+    kind: str, data: Mapping[str, object], front_end: FrontEnd | None = None
+) -> StaticCurve:
+    """The static curve of ``kind`` from a calibration table's keys (``CURVE_KEYS[kind]``; a
+    lookup in ``counts`` instead of ``resistance_ohm`` is read through ``front_end``, the
+    device's ADC front end); ``CurveError`` names a missing or bad key."""
+    if kind == "lookup" and "counts" in data:
+        if "resistance_ohm" in data:
+            raise CurveError("counts", "give resistance_ohm or counts, not both")
+        if front_end is None:
+            raise CurveError(
+                "counts",
+                'a table in ADC counts needs the device\'s ADC front end (encoding = "adc"); give '
+                "resistance_ohm",
+            )
+        if "force_n" not in data:
+            raise CurveError("force_n", "required key is missing (lookup tables need counts and force_n)")
+        counts, forces = (number_list(k, data[k]) for k in ("counts", "force_n"))
+        return CountsLookupCurve(counts, forces, front_end)
     keys = CURVE_KEYS[kind]
     for key in keys:
         if key not in data:
@@ -323,8 +461,9 @@ def curve_body_from_table(kind: str, data: Mapping[str, object]) -> StaticCurve:
 
 
 class KnotTable:
-    """Lookup tables, one per row, as padded arrays: force against ln R through each table's
-    knots (resistance increasing, force non-increasing), linear between them and, beyond
+    """Lookup tables, one per row, as padded arrays: force against each table's abscissa (ln R,
+    or a counts table's signed code: ``knot_abscissa``), increasing with the resistance, through
+    its knots (force non-increasing), linear between them and, beyond
     them, along the end segments. An end segment runs from the end knot to the nearest knot
     of another force: a flat end (a bench's holds give bins of equal median force) extended
     flat would read the end force at any resistance beyond it, a phantom force at rest. An
@@ -338,7 +477,7 @@ class KnotTable:
         self.last = np.array([max(len(f) - 1, 1) for _, f in tables], dtype=np.intp)
         low_other, high_other = np.ones(n, dtype=np.intp), np.zeros(n, dtype=np.intp)
         for i, (r, f) in enumerate(tables):
-            self.log_r[i, : len(f)] = np.log(np.asarray(r, dtype=np.float64))
+            self.log_r[i, : len(f)] = np.asarray(r, dtype=np.float64)
             self.knot_f[i] = f[-1]
             self.knot_f[i, : len(f)] = f
             fa = np.asarray(f, dtype=np.float64)

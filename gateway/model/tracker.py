@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from .calibrated import CurveChannel
 from .drift import PLAY_SHARES, equilibrium_force_n, play_direction_series
 from .inversion import ForceStatus
-from .static_curves import CURVE_KINDS, KnotTable, LineCurve, LookupCurve, PowerLawCurve
+from .static_curves import CURVE_KINDS, CountsLookupCurve, KnotTable, LineCurve, LookupCurve, PowerLawCurve
 
 __all__ = ["CurveSet", "CurveState", "track_series"]
 
@@ -97,10 +97,22 @@ class CurveSet:
         self.c = np.array([x.intercept_s for x in line], dtype=np.float64)
         self.knots = KnotTable(
             [
-                (c.curve.resistance_ohm, c.curve.force_n) if isinstance(c.curve, LookupCurve) else _DUMMY
+                (c.curve.knot_abscissa(), c.curve.force_n)
+                if isinstance(c.curve, LookupCurve)
+                else (c.curve.knot_abscissa(), c.curve._knot_forces())
+                if isinstance(c.curve, CountsLookupCurve)
+                else _DUMMY
                 for c in chans
             ]
         )
+        #: tables given in counts, read at their readings' exact codes (not in ln R): the
+        #: channels of each front end, and one of their curves (the code is the front end's)
+        by_front_end: dict[object, tuple[list[int], CountsLookupCurve]] = {}
+        for k, c in enumerate(chans):
+            if isinstance(c.curve, CountsLookupCurve):
+                group = by_front_end.setdefault(c.curve.front_end, ([], c.curve))
+                group[0].append(k)
+        self.in_counts = tuple((np.array(ks, dtype=np.intp), curve) for ks, curve in by_front_end.values())
         self.is_power = self.kind == 0
         self.is_line = self.kind == 1
         self.is_lookup = self.kind == 2
@@ -147,6 +159,8 @@ class CurveSet:
                 x = np.where(self.is_line, (g - self.c) / self.m, x)
             if self.is_lookup.any():
                 lr = np.where(r > 0.0, np.log(np.where(r > 0.0, r, 1.0)), np.nan)
+                for ks, curve in self.in_counts:
+                    lr[ks] = curve.abscissa(r[ks])
                 x = np.where(self.is_lookup, self.knots.force(lr), x)
             # an open sensor (no current) carries no load, whatever the curve reads at 0 S
             return np.asarray(np.where(np.isnan(g), np.nan, np.where(g == 0.0, 0.0, x + self.offset)))
