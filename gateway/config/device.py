@@ -15,19 +15,27 @@ and the key path.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Final
 
 from ..errors import ConfigError
-from ..modbus.register_map import FRAME_ENCODINGS, MAX_READ_REGISTERS, Encoding, ValueFrame
+from ..modbus.register_map import (
+    FRAME_ENCODINGS,
+    FRAME_TYPE_WIDTHS,
+    MAX_READ_REGISTERS,
+    Encoding,
+    ValueFrame,
+)
 from ..model.conversion import Conversion, ConversionError, conversion_from_table
 from ..model.curves import DRIFT_KEYS, CurveError, Drift
 from ..model.effects import EFFECT_NAMES, PAPER_EFFECTS, UnknownEffectError, parse_effects
 from ..model.frontend_base import FrontEnd
 from ..model.params import PARAMETER_RANGES, ParameterError, SensorParams, parameter_names
 from .calibration_format import CalibrationFile, read_calibration
+from .layout import GridLayout
 from .overrides import (
     DEVICE_OVERRIDE_KEY,
     EFFECTS,
@@ -40,6 +48,7 @@ from .overrides import (
 )
 from .profiles import load_profile, merge_profile
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS, parse_baselines, parse_divider, parse_front_end, parse_layout
+from .regions import parse_regions
 from .schema import DEVICE_ID, MAX_CHANNELS, POSITION_MM, ChannelConfig, DeviceConfig
 from .tables import (
     REQUIRED,
@@ -87,6 +96,9 @@ DEVICE_KEYS: Final = (
     "baseline_ohm",
     "model",
     "channel",
+    "region",
+    "address_unit",
+    "value_stride",
 )
 _MODEL_KEYS: Final = ("effects", "params", DEVICE_OVERRIDE_KEY)
 _CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params", OVERRIDE_KEY)
@@ -201,9 +213,20 @@ def _parse_device(
     table = Table(ctx, data, path, DEVICE_KEYS)
     name = table.name("name")
     device_id = table.integer("device_id", REQUIRED, *DEVICE_ID)
-    n = table.integer("channels", REQUIRED, 1, MAX_CHANNELS)
     frame_table = table.table("frame", FRAME_KEYS, "[bus.device.frame]")
-    frame = parse_frame(frame_table, n, MAX_READ_REGISTERS)
+    region_set = parse_regions(ctx, table, frame_table.choice("type", "uint16", tuple(FRAME_TYPE_WIDTHS)))
+    if region_set is None:
+        n = table.integer("channels", REQUIRED, 1, MAX_CHANNELS)
+    else:
+        n = table.integer("channels", region_set.n_channels, 1, MAX_CHANNELS)
+        if n != region_set.n_channels:
+            raise table.error(
+                "channels",
+                f"{n}, but the regions hold {region_set.n_channels} (the sum of their rows x columns); "
+                "drop this key or make them agree",
+            )
+    regions = () if region_set is None else region_set.regions
+    frame = parse_frame(frame_table, n, MAX_READ_REGISTERS, region_set)
     if frame is None:
         encoding = table.choice("encoding", Encoding.ADC, (Encoding.ADC, Encoding.FLOAT32))
     else:
@@ -215,7 +238,11 @@ def _parse_device(
                 "drop this key",
             )
     output_drift = _output_drift(frame_table, frame)
-    layout = parse_layout(table, table.table("layout", LAYOUT_KEYS, "[bus.device.layout]"), n)
+    if regions:
+        # the grid the device's consumers without regions see; contact area uses its cell
+        layout = GridLayout(n, math.isqrt(n - 1) + 1, regions[0].pitch_x_mm, regions[0].pitch_y_mm)
+    else:
+        layout = parse_layout(table, table.table("layout", LAYOUT_KEYS, "[bus.device.layout]"), n)
     allow_write = table.boolean("allow_write", False)
     calibration = table.path_value("calibration")
     registers = parse_registers(
@@ -285,8 +312,9 @@ def _parse_device(
     names: list[str] = []
     # name -> (index, key path of an explicit name or None for a default name)
     name_owner: dict[str, tuple[int, str | None]] = {}
+    region_names = [r.channel_name(k) for r in regions for k in range(r.n_channels)]
     for i in range(n):
-        channel_name = f"ch{i:02d}"
+        channel_name = region_names[i] if regions else f"ch{i:02d}"
         where: str | None = None
         if i in entries and entries[i][0].has("name"):
             channel_name = entries[i][0].name("name")
@@ -297,7 +325,8 @@ def _parse_device(
             raise ctx.error(
                 blame_path,
                 f"duplicate channel name {channel_name!r}: channels {other} and {i} both have it "
-                "(unnamed channels are called ch00, ch01, ...); channel names are unique within a device",
+                "(unnamed channels are called ch00, ch01, ..., or <region>-r<row>c<column>); "
+                "channel names are unique within a device",
             )
         name_owner[channel_name] = (i, where)
         names.append(channel_name)
@@ -311,8 +340,9 @@ def _parse_device(
 
     channels: list[ChannelConfig] = []
     contradictions: list[Contradiction] = []
+    positions = [r.position_mm(k) for r in regions for k in range(r.n_channels)]
     for i, channel_name in enumerate(names):
-        x_mm, y_mm = layout.position_mm(i)
+        x_mm, y_mm = positions[i] if regions else layout.position_mm(i)
         enabled = True
         entry_table, own_params, own_override = entries.get(i, (None, {}, frozenset[str]()))
         own_effects = None
@@ -393,6 +423,7 @@ def _parse_device(
         checks=checks,
         profile=profile,
         output_drift=output_drift,
+        regions=regions,
     )
     check_overlaps(ctx, path, device)
     refused = [c for c in contradictions if not c.overridden]
