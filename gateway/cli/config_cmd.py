@@ -158,8 +158,20 @@ def _device_lines(dev: DeviceConfig) -> list[str]:
         else:
             hint = "see `tare`, or `tare --device-zero` for the device's own"
         out.append(f"    zero: no baselines (an unloaded channel must read the model's own R(0 N); {hint})")
+    if dev.regions:
+        out.append("    layout: by region (below); each channel where its region is drawn, in mm")
+        return out
     out.append(f"    layout: {dev.layout.describe()}; channel indices as drawn:")
     out.extend(_grid(dev))
+    return out
+
+
+def _region_lines(dev: DeviceConfig, requests: int) -> list[str]:
+    """A device made of regions: how many requests a frame takes, and each region."""
+    if not dev.regions:
+        return []
+    out = [f"    {_plural(len(dev.regions), 'region')}, a frame takes {_plural(requests, 'request')}:"]
+    out.extend(f"      {region.describe()}" for region in dev.regions)
     return out
 
 
@@ -270,7 +282,7 @@ def check_config(config_path: Path) -> None:
                     f"    {req.kind} {req.address}..{req.end} ({_plural(req.count, 'register')}): "
                     f"{', '.join(req.purpose)}"
                 )
-            for line in _device_lines(dev):
+            for line in [*_region_lines(dev, len(plan)), *_device_lines(dev)]:
                 click.echo(line)
             if dev.calibration is not None:
                 for line in _override_lines(_overrides(text, config_path, b, d)):

@@ -39,6 +39,7 @@ from ..metrics.event_loop import EventLoopCollector
 from ..metrics.exposition import SnapshotRegistry
 from ..metrics.server import MetricsServer
 from ..metrics.web_config import WebConfig, load_web_config
+from ..modbus.plan import MERGE_GAP, device_plan
 from ..model import Divider
 from ..mqtt.link import MqttLink
 from ..runtime.frame import frame_of
@@ -298,10 +299,13 @@ def poll_once(config_path: Path, as_json: bool, log_level: str) -> None:
         click.echo(json.dumps(snapshot_json(snap), indent=2))
     else:
         click.echo(snapshot_table(snap))
-        for _, device in config.devices():
+        for bus, device in config.devices():
             click.echo(f"device {device.name}, what is on:")
             for line in device_summary(device):
                 click.echo(f"  {line}")
+            requests = len(device_plan(device, bus.max_read_registers, MERGE_GAP, clock=True))
+            regions = f" of {len(device.regions)} regions" if device.regions else ""
+            click.echo(f"  a frame{regions} takes {requests} request{'s' if requests != 1 else ''}")
     if not all(d.up for d in snap.devices.values()):
         sys.exit(EXIT_UNREACHABLE)
 

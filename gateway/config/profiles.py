@@ -39,9 +39,12 @@ PROFILE_KEYS: Final = (
     "frame",
     "setup",
     "actions",
+    "region",
+    "address_unit",
+    "value_stride",
 )
-#: Tables merged key by key with the device's own (``setup`` is an array: the device's own
-#: replaces the profile's; ``actions`` merge by name).
+#: Tables merged key by key with the device's own (``setup`` and ``region`` are arrays: the
+#: device's own replaces the profile's; ``actions`` merge by name).
 MERGED_TABLES: Final = ("registers", "clock", "front_end", "layout", "checks", "model", "frame", "actions")
 _SUFFIX: Final = ".toml"
 #: The profile's tables whose keys do not depend on a kind: an unknown key in one of them (e.g.
