@@ -64,7 +64,9 @@ def _value(text: str, family: str, device: str, channel: str) -> float | None:
 def test_ratio_readings_are_exported_as_a_ratio_not_ohm(tmp_path: Path) -> None:
     snap = _snapshot(tmp_path)
     text = render(snap)
-    assert text.encode() == generate_latest(make_registry(lambda: snap, CollectorRegistry(auto_describe=False)))
+    assert text.encode() == generate_latest(
+        make_registry(lambda: snap, CollectorRegistry(auto_describe=False))
+    )
     # rising with load: r / R_ref = FS / code - 1 = 4095 / 2048 - 1 = 2047 / 2048
     for channel in ("ch00", "ch01"):
         assert _value(text, "tactile_resistance_ratio", "rel", channel) == 2047 / 2048
@@ -82,5 +84,7 @@ def test_promtool_accepts_the_ratio_family(tmp_path: Path) -> None:
     path = tmp_path / "metrics.txt"
     path.write_text(render(_snapshot(tmp_path)))
     with path.open("rb") as f:
-        result = subprocess.run([promtool, "check", "metrics"], stdin=f, capture_output=True, text=True, timeout=60)
+        result = subprocess.run(
+            [promtool, "check", "metrics"], stdin=f, capture_output=True, text=True, timeout=60
+        )
     assert result.returncode == 0, result.stdout + result.stderr
