@@ -19,6 +19,7 @@ from typing import Any, Protocol, TypedDict
 from ..runtime.counters import DeviceCounters
 from ..runtime.frame import DECIMALS, Frame, compact_json, frame_of
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
+from .region_layout import RegionDescription, groups_json, regions_json
 
 #: Units of every quantity in the API, as listed with each device.
 UNITS: dict[str, str] = {
@@ -101,6 +102,8 @@ class DeviceDescription(Protocol):
     def layout(self) -> LayoutDescription: ...
     @property
     def channels(self) -> Sequence[ChannelDescription]: ...
+    @property
+    def regions(self) -> Sequence[RegionDescription]: ...
 
 
 def layout_json(
@@ -111,7 +114,8 @@ def layout_json(
     of one cell (mm^2: the layout's ``pitch_x_mm * pitch_y_mm``; the page's pressure is force
     over it) and the channels turned off in the configuration (``enabled = false``: they are
     never polled, so frames do not carry them; ``null`` when the page was not given the
-    configuration)."""
+    configuration), and for a device made of regions its ``regions`` and ``groups``
+    (``region_layout``; empty lists for one grid, or without the configuration)."""
     if config is not None:
         area: float | None = config.layout.cell_area_mm2
         disabled: list[dict[str, Any]] | None = [
@@ -145,6 +149,8 @@ def layout_json(
             )
         ],
         "disabled_channels": disabled,
+        "regions": regions_json(config.regions) if config is not None else [],
+        "groups": groups_json(config.regions) if config is not None else [],
     }
 
 
