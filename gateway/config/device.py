@@ -36,6 +36,7 @@ from ..model.frontend_base import FrontEnd
 from ..model.params import PARAMETER_RANGES, ParameterError, SensorParams, parameter_names
 from .calibration_format import CalibrationFile, read_calibration
 from .layout import GridLayout
+from .limits import DEFAULT_DEAD_AFTER_S
 from .overrides import (
     DEVICE_OVERRIDE_KEY,
     EFFECTS,
@@ -49,7 +50,7 @@ from .overrides import (
 from .profiles import load_profile, merge_profile
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS, parse_baselines, parse_divider, parse_front_end, parse_layout
 from .regions import parse_regions
-from .schema import DEVICE_ID, MAX_CHANNELS, POSITION_MM, ChannelConfig, DeviceConfig
+from .schema import DEAD_AFTER_S, DEVICE_ID, MAX_CHANNELS, POSITION_MM, ChannelConfig, DeviceConfig
 from .tables import (
     REQUIRED,
     Context,
@@ -99,6 +100,7 @@ DEVICE_KEYS: Final = (
     "region",
     "address_unit",
     "value_stride",
+    "dead_after_s",
 )
 _MODEL_KEYS: Final = ("effects", "params", DEVICE_OVERRIDE_KEY)
 _CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params", OVERRIDE_KEY)
@@ -424,6 +426,9 @@ def _parse_device(
         profile=profile,
         output_drift=output_drift,
         regions=regions,
+        dead_after_s=table.number(
+            "dead_after_s", DEFAULT_DEAD_AFTER_S if regions else 0.0, DEAD_AFTER_S, " s (0: off)"
+        ),
     )
     check_overlaps(ctx, path, device)
     refused = [c for c in contradictions if not c.overridden]

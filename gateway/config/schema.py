@@ -31,6 +31,7 @@ from ..model.curves import CurveChannel, Drift
 from ..model.params import Interval
 from .layout import GridLayout
 from .limits import MAX_CHANNELS, MAX_PITCH_MM, MAX_POSITION_MM, PITCH_MM, POSITION_MM
+from .foxglove import FoxgloveConfig
 from .mqtt import MqttConfig
 from .regions import Region
 
@@ -98,6 +99,7 @@ TIMEOUT_S: Final = Interval(0.0, 60.0, low_inclusive=False)
 POLL_INTERVAL_S: Final = Interval(0.0, 3600.0, low_inclusive=True)
 BACKOFF_INITIAL_S: Final = Interval(0.0, 60.0, low_inclusive=False)
 BACKOFF_MAX_S: Final = 3600.0
+DEAD_AFTER_S: Final = Interval(0.0, 86400.0, low_inclusive=True)
 
 
 def check_integer(where: str, name: str, value: object, low: int, high: int, unit: str = "") -> None:
@@ -237,6 +239,9 @@ class DeviceConfig:
     #: the named sub-grids the channels come from, in channel order (``regions.Region``);
     #: () for a device whose channels are the one grid of ``layout``
     regions: tuple[Region, ...] = ()
+    #: seconds a taxel frozen while its region moves takes to read dead (0: not tracked;
+    #: ``runtime.dead_taxels``)
+    dead_after_s: float = 0.0
 
     def __post_init__(self) -> None:
         where = f"device {self.name!r}"
@@ -274,6 +279,7 @@ class DeviceConfig:
             if channel.name in names:
                 raise ConfigError(f"{where}: duplicate channel name {channel.name!r}")
             names.add(channel.name)
+        check_number(where, "dead_after_s", self.dead_after_s, DEAD_AFTER_S, " s (0: off)")
         first = 0
         for region in self.regions:
             if region.first_channel != first:
@@ -398,6 +404,7 @@ class GatewayConfig:
     buses: tuple[BusConfig, ...]
     source: Path | None
     mqtt: MqttConfig | None = None  # publishing to a broker: off when None
+    foxglove: FoxgloveConfig | None = None  # serving Foxglove's WebSocket protocol: off when None
 
     def __post_init__(self) -> None:
         buses = [b.name for b in self.buses]

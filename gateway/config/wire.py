@@ -26,6 +26,7 @@ from ..modbus.register_map import (
     FrameTable,
     RegisterCheck,
     RegisterMap,
+    SpecialCodes,
     ValueFrame,
     register_blocks,
     status_span,
@@ -78,7 +79,16 @@ FRAME_KEYS: Final = (
     "blocks",
     "row_select_address",
     "drift",
+    "special",
 )
+_SPECIAL_KEYS: Final = ("saturated", "error", "saturated_from", "error_from")
+#: The raw integer range of each value type a special code may name.
+_RAW_RANGES: Final = {
+    "uint16": (0, 0xFFFF),
+    "int16": (-0x8000, 0x7FFF),
+    "uint32": (0, 0xFFFF_FFFF),
+    "int32": (-0x8000_0000, 0x7FFF_FFFF),
+}
 _BLOCK_KEYS: Final = ("address", "values", "row")
 _REQUEST_KEYS: Final = ("address_bytes", "count_bytes", "count_unit", "byte_count_bytes")
 _WRITE_KEYS: Final = ("what", "address", "value", "values", "function", "verify")
@@ -222,6 +232,7 @@ def parse_frame(table: Table, n: int, max_read: int, regions: RegionSet | None =
         )
     if row_select is not None and any(b.row is None for b in blocks):
         raise table.error("blocks", "with row_select_address every block names its row (row = 0, 1, ...)")
+    special = _parse_special(table, value_type)
     try:
         return ValueFrame(
             quantity,
@@ -235,9 +246,41 @@ def parse_frame(table: Table, n: int, max_read: int, regions: RegionSet | None =
             vendor,
             row_select,
             0 if regions is None or regions.value_stride == width else regions.value_stride,
+            special,
         )
     except ConfigError as exc:
         raise table.ctx.error(table.path, str(exc)) from None
+
+
+def _parse_special(frame: Table, value_type: str) -> SpecialCodes | None:
+    """``special = { saturated = [...], saturated_from = N, error = [...], error_from = N }``:
+    raw integers (before scale and offset) that are codes, not readings."""
+    if not frame.has("special"):
+        return None
+    table = frame.table("special", _SPECIAL_KEYS, "special = { saturated = [65535], error_from = 65280 }")
+    if value_type not in _RAW_RANGES:
+        raise frame.error("special", f"special codes are integers; a {value_type} frame has none")
+    low, high = _RAW_RANGES[value_type]
+    lists: dict[str, tuple[int, ...]] = {}
+    for key in ("saturated", "error"):
+        raw = table.data.get(key, [])
+        if not isinstance(raw, list):
+            raise table.error(key, f"expected an array of integers in {low}..{high}, got {show_value(raw)}")
+        for i, value in enumerate(raw):
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise table.ctx.error(
+                    f"{table.at(key)}[{i}]", f"expected an integer in {low}..{high}, got {show_value(value)}"
+                )
+            if not low <= value <= high:
+                raise table.ctx.error(
+                    f"{table.at(key)}[{i}]",
+                    f"{value} is out of range; allowed: {low}..{high} (a raw {value_type})",
+                )
+        lists[key] = tuple(int(v) for v in raw)
+    saturated_from = table.integer("saturated_from", high, low, high) if table.has("saturated_from") else None
+    error_from = table.integer("error_from", high, low, high) if table.has("error_from") else None
+    special = SpecialCodes(lists["saturated"], lists["error"], saturated_from, error_from)
+    return special if special.describe() else None
 
 
 def _frame_block(

@@ -12,8 +12,9 @@ device clock (s). A block that was not read is a ``DecodeError`` when required a
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -28,10 +29,19 @@ from .register_map import (
     FrameQuantity,
     RegisterKind,
     RegisterSpace,
+    SpecialCodes,
     ValueFrame,
     frame_space,
     status_registers,
 )
+
+#: Each quantity's base unit (a frame decoded in it is not scaled).
+_BASE_UNITS = {
+    FrameQuantity.COUNTS: "counts",
+    FrameQuantity.RESISTANCE: "ohm",
+    FrameQuantity.FORCE: "N",
+    FrameQuantity.PRESSURE: "kPa",
+}
 
 __all__ = ["ImageBlock", "RawSample", "RegisterImage", "RegisterKind", "RegisterSpace", "decode_sample"]
 
@@ -106,6 +116,9 @@ class RawSample:
     output_force_n: FloatArray | None = None
     #: ... or pressure (kPa), which the processor turns into force over the cell's area
     output_pressure_kpa: FloatArray | None = None
+    #: per channel, whether its raw value is a declared code (``register_map.SpecialCodes``:
+    #: 0 none, 1 saturated, 2 error); None when the frame declares none
+    special: NDArray[np.int8] | None = None
 
 
 def _strided_index(values: int, stride: int, width: int) -> NDArray[np.intp]:
@@ -139,6 +152,24 @@ def decode_frame(frame: ValueFrame, image: RegisterImage) -> NDArray[np.uint16] 
         if frame.factor != 1.0
         else np.asarray(values, dtype=np.float64)
     )
+
+
+def _special_codes(frame: ValueFrame, image: RegisterImage) -> NDArray[np.int8]:
+    """Each channel's special code (``SpecialCodes.classify``) from its raw integer; a code of
+    a 16-bit value is looked up in a table made once per frame."""
+    special = frame.special
+    assert special is not None
+    raw = decode_frame(replace(frame, scale=1.0, offset=0.0, unit=_BASE_UNITS[frame.quantity]), image)
+    if frame.value_type == "uint16" and raw.dtype == np.uint16:
+        return _special_table(special)[raw]
+    return special.classify(np.asarray(raw).astype(np.int64))
+
+
+@functools.lru_cache(maxsize=32)
+def _special_table(special: SpecialCodes) -> NDArray[np.int8]:
+    table = special.classify(np.arange(0x10000, dtype=np.int64))
+    table.setflags(write=False)
+    return table
 
 
 def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
@@ -192,6 +223,9 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
         if words is not None:
             ticks = register_value(words.tolist(), wo, bo)
             device_time = ticks * clock.tick_s
+    special = None
+    if regs.frame is not None and regs.frame.special is not None:
+        special = _special_codes(regs.frame, image)
     return RawSample(
         counts,
         resistance,
@@ -204,4 +238,5 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
         ticks,
         output_force,
         output_pressure,
+        special,
     )

@@ -51,8 +51,10 @@ from ..model.curves import CurveChannel, CurveSet, CurveState, Drift, LineCurve
 from .baseline import BaselineCorrection
 from .clock import NO_CLOCK_HISTORY, ClockHealth, time_step
 from .converters import Converter, CurveConverter, PhysicsConverter, Step
+from .dead_taxels import DeadState, DeadTaxelTracker
 from .snapshot import (
     VALUED,
+    ChannelStatus,
     DeviceSnapshot,
     StaticEstimate,
     array_quantities,
@@ -67,6 +69,7 @@ from .status_tables import (
     _CHANNEL_NO_ZERO,
     _CHANNEL_OK,
     _CHANNEL_OPEN,
+    _CHANNEL_SATURATED,
     _CHANNEL_SHORT,
     _CHANNEL_STALE,
     _CHANNEL_UNCALIBRATED,
@@ -96,6 +99,35 @@ class DeviceState:
     clock: ClockHealth = NO_CLOCK_HISTORY
     #: the drift state of the channels read through a curve (``gateway.model.curves``)
     curve_state: CurveState | None = None
+    #: the dead-taxel tracker's state (``runtime.dead_taxels``; None: none yet)
+    dead: DeadState | None = None
+
+
+def dead_taxel_tracker(device: DeviceConfig, index: NDArray[np.int64]) -> DeadTaxelTracker | None:
+    """The tracker of a device's enabled channels ``index``, by region (a device without
+    regions is one region, ``all``); None when the device tracks none (``dead_after_s = 0``)."""
+    if not device.dead_after_s > 0.0:
+        return None
+    if not device.regions:
+        return DeadTaxelTracker(np.zeros(len(index), dtype=np.intp), ("all",), device.dead_after_s)
+    region_of = np.empty(device.n_channels, dtype=np.intp)
+    for k, region in enumerate(device.regions):
+        region_of[region.channel_slice] = k
+    names = tuple(r.name for r in device.regions)
+    return DeadTaxelTracker(region_of[index], names, device.dead_after_s)
+
+
+#: The status of a channel by special code x len(ChannelStatus) + status: a declared code
+#: (1 saturated, 2 error) replaces the status; 0 keeps it.
+_SPECIAL_STATUS = frozen_copy(
+    np.concatenate(
+        [
+            np.arange(len(ChannelStatus), dtype=np.int8),
+            np.full(len(ChannelStatus), _CHANNEL_SATURATED, dtype=np.int8),
+            np.full(len(ChannelStatus), _CHANNEL_ERROR, dtype=np.int8),
+        ]
+    )
+)
 
 
 def state_arrays(state: ModelState) -> list[FloatArray]:
@@ -229,6 +261,7 @@ class DeviceProcessor:
         uncalibrated = np.array([device.needs_calibration(c) for c in chans], dtype=np.bool_)
         self._uncalibrated = frozen_copy(uncalibrated) if uncalibrated.any() else None
         self._relative = device.encoding is Encoding.ADC and isinstance(device.front_end, RatioFrontEnd)
+        self._dead = dead_taxel_tracker(device, self.index)
 
     def _tare(self, r_model: FloatArray) -> FloatArray:
         """``r_model`` with each baseline channel's excess conductance taken off."""
@@ -437,7 +470,9 @@ class DeviceProcessor:
         static = None if self.curves is None else step.static_n
         return TrackedSample(
             raw, r_out, r_model, base, force, model_status, temperature,
-            DeviceState(model_state, now, host_time_s, use_device, None, clock_health, curve_state),
+            DeviceState(
+                model_state, now, host_time_s, use_device, None, clock_health, curve_state, state.dead
+            ),
             wall_time_s, static, None if self.output else self._idle_unzeroed(raw),
         )  # fmt: skip
 
@@ -477,8 +512,19 @@ class DeviceProcessor:
             status = np.where(tracked.unzeroed & (status == _CHANNEL_OK), np.int8(_CHANNEL_NO_ZERO), status)
         if self._uncalibrated is not None:
             status = np.where(self._uncalibrated & VALUED[status], np.int8(_CHANNEL_UNCALIBRATED), status)
+        special = None if raw.special is None else raw.special[self._pick]
+        if special is not None and special.any():  # declared codes: statuses, never forces
+            status = _SPECIAL_STATUS[special * np.int8(len(ChannelStatus)) + status]
+        dead_state, dead = tracked.state.dead, None
+        dead_by_region: tuple[tuple[str, int], ...] = ()
+        if self._dead is not None:
+            dead_state, dead, dead_by_region = self._dead_taxels(tracked)
+            if dead.any():
+                status = np.where(dead, np.int8(_CHANNEL_ERROR), status)
         valued = VALUED[status]
         force = np.where(valued, tracked.force_n, np.nan)
+        if special is not None and special.any():
+            force = np.where(special != 0, np.nan, force)
         reference = self._no_values
         if raw.reference_force_n is not None:
             reference = read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
@@ -529,9 +575,27 @@ class DeviceProcessor:
             if temperature is None
             else read_only(np.asarray(temperature, dtype=np.float64)),
             resistance_relative=self._relative,
+            dead=None if dead is None else read_only(dead),
+            dead_by_region=dead_by_region,
         )
         s = tracked.state
-        return snap, replace(s, last=snap)
+        return snap, replace(s, last=snap, dead=dead_state)
+
+    def _dead_taxels(
+        self, tracked: TrackedSample
+    ) -> tuple[DeadState, NDArray[np.bool_], tuple[tuple[str, int], ...]]:
+        """The dead-taxel tracker's step on this poll's raw values (``runtime.dead_taxels``)."""
+        assert self._dead is not None
+        raw = tracked.raw
+        values = next(
+            v
+            for v in (raw.counts, raw.resistance_ohm, raw.output_force_n, raw.output_pressure_kpa)
+            if v is not None
+        )[self._pick]
+        state = tracked.state.dead or self._dead.initial_state(len(self.channels))
+        now_s = tracked.state.last_host_time_s
+        new, dead = self._dead.update(state, values, 0.0 if now_s is None else now_s)
+        return new, dead, tuple(self._dead.counts(dead).items())
 
     def _clock_fallback(self, raw: RawSample, clock: ClockHealth) -> str | None:
         """Why a device whose map names a clock is timed by the host clock (None if it is not)."""

@@ -266,6 +266,11 @@ class DeviceSnapshot:
     #: True when ``resistance_ohm`` holds r / R_ref (dimensionless), not ohm: a ``ratio`` front
     #: end's readings, in units of the board's unknown reference resistor
     resistance_relative: bool = False
+    #: per channel, True where the taxel is dead: frozen while its region moves
+    #: (``runtime.dead_taxels``; its status is ``error``); None when not tracked
+    dead: NDArray[np.bool_] | None = None
+    #: dead taxels per region, every region (0 included); () when not tracked
+    dead_by_region: tuple[tuple[str, int], ...] = ()
     _static: Once[FloatArray] = field(default_factory=Once, init=False, repr=False, compare=False)
     _derived: dict[object, Once[object]] = field(default_factory=dict, init=False, repr=False, compare=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False, compare=False)

@@ -1,0 +1,103 @@
+"""Dead taxels: a taxel frozen while its region's other taxels move.
+
+A taxel whose raw value stays exactly the same (at a rail or anywhere: a converter that no
+longer updates it, a broken trace read as 0) while the other taxels of its region keep
+changing is dead once it has been frozen for ``dead_after_s`` seconds, provided its region
+changed in at least half of the polls since it froze (``MIN_MOVING_FRACTION``). A region
+whose taxels are all still (nothing touches it, a noise-free idle reading) has no dead
+taxel: a whole dead region cannot be told from an idle one. A dead taxel is alive again as
+soon as its value changes.
+
+Per poll the work is a handful of vectorised numpy operations on the channel arrays (one
+comparison, one ``bincount`` over the regions, a few ``where``): tens of microseconds for a
+1,062-taxel hand (``bench/bench_gateway.py``). The tracker is configuration; its state is
+immutable and carried from poll to poll by the device's conversion state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..config.limits import DEFAULT_DEAD_AFTER_S
+
+__all__ = ["DEFAULT_DEAD_AFTER_S", "MIN_MOVING_FRACTION", "DeadState", "DeadTaxelTracker"]
+
+#: A frozen taxel's region must have changed in at least this fraction of the polls since it
+#: froze: neighbours that moved once, long ago, do not make a still taxel dead.
+MIN_MOVING_FRACTION: Final = 0.5
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class DeadState:
+    """What the tracker carries between polls (one entry per tracked channel): the last
+    value, when it last changed (s), the poll count and the region's moving-poll count when it
+    last changed, and per region the polls in which some taxel changed."""
+
+    last: FloatArray
+    still_since_s: FloatArray
+    poll_at_change: IntArray
+    moving_at_change: IntArray
+    region_moving: IntArray
+    polls: int = 0
+
+
+class DeadTaxelTracker:
+    """Finds dead taxels among channels grouped in regions (module docstring).
+
+    ``region_of`` gives each tracked channel's region (an index into ``region_names``)."""
+
+    def __init__(
+        self, region_of: NDArray[np.intp], region_names: tuple[str, ...], dead_after_s: float
+    ) -> None:
+        if not dead_after_s > 0.0:
+            raise ValueError(f"dead_after_s = {dead_after_s!r} must be > 0 s")
+        self.region_of = np.asarray(region_of, dtype=np.intp)
+        self.region_of.setflags(write=False)
+        self.region_names = region_names
+        self.dead_after_s = float(dead_after_s)
+        self._n_regions = len(region_names)
+
+    def initial_state(self, n: int) -> DeadState:
+        return DeadState(
+            np.full(n, np.nan),
+            np.full(n, np.nan),
+            np.zeros(n, dtype=np.int64),
+            np.zeros(n, dtype=np.int64),
+            np.zeros(self._n_regions, dtype=np.int64),
+        )
+
+    def update(
+        self, state: DeadState, values: NDArray[np.generic], now_s: float
+    ) -> tuple[DeadState, BoolArray]:
+        """The state after a poll of raw ``values`` at ``now_s`` (s, monotonic), and which
+        channels are dead. The first poll only records the values."""
+        v = np.asarray(values, dtype=np.float64)
+        changed = v != state.last  # NaN (the first poll) compares unequal: everything "changed"
+        polls = state.polls + 1
+        moved = np.bincount(self.region_of[changed], minlength=self._n_regions) > 0
+        region_moving = state.region_moving + moved
+        # the region's moving polls since each channel last changed, counted by its neighbours
+        still_since = np.where(changed, now_s, state.still_since_s)
+        poll_at = np.where(changed, polls, state.poll_at_change)
+        moving_at = np.where(changed, region_moving[self.region_of], state.moving_at_change)
+        new = DeadState(v, still_since, poll_at, moving_at, region_moving, polls)
+        if state.polls == 0:
+            return new, np.zeros(len(v), dtype=np.bool_)
+        frozen_s = now_s - still_since
+        neighbours = region_moving[self.region_of] - moving_at
+        dead = (frozen_s >= self.dead_after_s) & (neighbours >= MIN_MOVING_FRACTION * (polls - poll_at))
+        dead &= neighbours > 0
+        return new, dead
+
+    def counts(self, dead: BoolArray) -> dict[str, int]:
+        """Dead taxels per region name (every region, 0 included)."""
+        per = np.bincount(self.region_of[dead], minlength=self._n_regions)
+        return {name: int(c) for name, c in zip(self.region_names, per, strict=True)}
