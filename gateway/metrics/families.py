@@ -138,6 +138,12 @@ def _clock_faults(device: str, dev: DeviceSnapshot, counters: DeviceCounters | N
         yield (device, kind), float(count)
 
 
+def _dead_taxels(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
+    """Dead taxels by region (every region, 0 included), count; nothing when not tracked."""
+    for region, count in dev.dead_by_region:
+        yield (device, region), float(count)
+
+
 def _reads(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
     """Read requests attempted, count; nothing for a device without counters."""
     if counters is not None:
@@ -295,6 +301,14 @@ FAMILIES: Final[tuple[Family, ...]] = (
         f"Number of channels in contact (count), {_FROM_POLL}",
         ("device",),
         _device_value(lambda dev: dev.channels_in_contact),
+    ),
+    Family(
+        "tactile_dead_taxels",
+        "gauge",
+        "Dead taxels (count) by region: frozen while the rest of their region moves, for "
+        f"dead_after_s; their status is error, {_FROM_POLL}",
+        ("device", "region"),
+        _dead_taxels,
     ),
     Family(
         "tactile_device_clock_fallback",

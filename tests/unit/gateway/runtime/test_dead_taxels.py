@@ -14,6 +14,7 @@ import pytest
 
 from gateway.config import GatewayConfig, parse_config
 from gateway.errors import ConfigError
+from gateway.metrics.exposition import render
 from gateway.modbus.virtual import VirtualDevice, VirtualTransport
 from gateway.runtime.dead_taxels import DeadTaxelTracker
 from gateway.runtime.poller import Poller
@@ -182,3 +183,18 @@ def test_dead_after_s_is_checked_and_defaults_by_kind_of_device() -> None:
         ConfigError, match=r"dead_after_s: -1 is out of range; allowed: \[0, 86400\] s \(0: off\)"
     ):
         config(device="dead_after_s = -1")
+
+
+async def test_the_metric_counts_dead_taxels_by_region() -> None:
+    cfg = config(device="dead_after_s = 0.5")
+    dev = VirtualDevice()
+    poller, clock = poller_for(cfg, dev)
+    for k in range(8):
+        dev.set_holding(0, [1000 + k % 2, 2000, 1000, 1000])
+        dev.set_holding(10, [k % 2, 0, 7])
+        clock.now_s = 100.0 + 0.1 * k
+        await poll(poller)
+    text = render(poller.snapshot())
+    # tip: only taxel 0 moves, so 1, 2, 3 are frozen under a moving region; pad: 1 and 2
+    assert 'tactile_dead_taxels{device="hand",region="tip"} 3.0' in text
+    assert 'tactile_dead_taxels{device="hand",region="pad"} 2.0' in text
