@@ -27,6 +27,7 @@ import click
 from prometheus_client import CollectorRegistry
 
 from ..config import (
+    DeviceConfig,
     GatewayConfig,
     MetricsConfig,
     bus_config_for,
@@ -279,14 +280,58 @@ def snapshot_table(snap: GatewaySnapshot) -> str:
     return "\n".join(lines)
 
 
+def dead_taxel_lines(device: DeviceConfig, dev: DeviceSnapshot, watch_s: float) -> list[str]:
+    """The dead taxels of a device by region (``runtime.dead_taxels``), or why none can be
+    known yet; nothing for a device that tracks none."""
+    if not device.dead_after_s > 0.0:
+        return []
+    after = device.dead_after_s
+    if dev.dead is None or watch_s < after:
+        return [
+            f"dead taxels of {device.name}: a taxel is dead after {after:g} s frozen; "
+            f"watch with --for {2 * after:g} or more"
+        ]
+    names = [name for name, dead in zip(dev.channel_names, dev.dead.tolist(), strict=True) if dead]
+    lines = [f"dead taxels of {device.name} (frozen for {after:g} s while their region moved): {len(names)}"]
+    for region in device.regions or ():
+        inside = [n for n in names if n.startswith(f"{region.name}-")]
+        lines.append(f"  {region.name}: {', '.join(inside) if inside else 'none'}")
+    if not device.regions:
+        lines.append(f"  {', '.join(names) if names else 'none'}")
+    return lines
+
+
+async def _poll_for(config: GatewayConfig, watch_s: float) -> GatewaySnapshot:
+    """Poll every device once, then again at the fastest bus's poll interval until
+    ``watch_s`` seconds have passed; the last snapshot."""
+    poller = Poller(config)
+    start = time.monotonic()
+    snap = await poller.poll_once()
+    interval = min(bus.poll_interval_s for bus in config.buses)
+    while time.monotonic() - start < watch_s:
+        await asyncio.sleep(interval)
+        snap = await poller.poll_once()
+    return snap
+
+
 @click.command("poll-once")
 @config_option
 @click.option("--json", "as_json", is_flag=True, help="print JSON instead of a table")
+@click.option(
+    "--for",
+    "watch_s",
+    type=click.FloatRange(0.0, 3600.0),
+    default=0.0,
+    show_default=True,
+    help="keep polling this many seconds and show the last poll (finds dead taxels)",
+)
 @_log_level
-def poll_once(config_path: Path, as_json: bool, log_level: str) -> None:
+def poll_once(config_path: Path, as_json: bool, watch_s: float, log_level: str) -> None:
     """Poll every device once and print resistance, force and status of each channel.
 
-    Exit status 1 if a device could not be read (its channels are listed as stale).
+    With --for S it keeps polling for S seconds and shows the last poll, with the dead
+    taxels found by region. Exit status 1 if a device could not be read (its channels are
+    listed as stale).
     """
     _setup_logging("error" if log_level == "info" else log_level)
     try:
@@ -294,7 +339,7 @@ def poll_once(config_path: Path, as_json: bool, log_level: str) -> None:
     except (ConfigError, OSError) as exc:
         click.echo(f"tactile-gateway: {exc}", err=True)
         sys.exit(EXIT_CONFIG)
-    snap = asyncio.run(Poller(config).poll_once())
+    snap = asyncio.run(_poll_for(config, watch_s))
     if as_json:
         click.echo(json.dumps(snapshot_json(snap), indent=2))
     else:
@@ -306,6 +351,9 @@ def poll_once(config_path: Path, as_json: bool, log_level: str) -> None:
             requests = len(device_plan(device, bus.max_read_registers, MERGE_GAP, clock=True))
             regions = f" of {len(device.regions)} regions" if device.regions else ""
             click.echo(f"  a frame{regions} takes {requests} request{'s' if requests != 1 else ''}")
+            if device.name in snap.devices:
+                for line in dead_taxel_lines(device, snap.devices[device.name], watch_s):
+                    click.echo(line)
     if not all(d.up for d in snap.devices.values()):
         sys.exit(EXIT_UNREACHABLE)
 
