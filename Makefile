@@ -63,13 +63,16 @@ demo: $(STAMP)
 	$(VENV)/bin/tactile-gateway demo
 
 # The docs' screenshots of the page, made by the tests that check what they show (headless
-# chromium through Playwright): the live page at the demo's forces and the playback of a record.
+# chromium through Playwright): the live page at the demo's forces, the playback of a record and
+# the hand profile drawn by regions.
 screenshots: $(STAMP) sysdeps
 	TACTILE_SCREENSHOT_DEMO=$(CURDIR)/docs/screenshot-pressure-map.png \
 	TACTILE_SCREENSHOT_PLAYBACK=$(CURDIR)/docs/screenshot-playback.png \
+	TACTILE_SCREENSHOT_HAND=$(CURDIR)/docs/screenshot-hand.png \
 	$(PY) -m pytest -q \
 		tests/integration/test_web_page.py::test_auto_range_makes_the_peak_bright_at_demo_forces \
-		tests/integration/test_web_playback.py::test_playback_moves_through_the_record
+		tests/integration/test_web_playback.py::test_playback_moves_through_the_record \
+		tests/integration/test_web_hand.py::test_the_page_draws_the_hand_by_regions_with_sums
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache *.egg-info
