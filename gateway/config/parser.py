@@ -19,6 +19,7 @@ from ..modbus.plan import read_plan
 from ..modbus.register_map import MAX_READ_REGISTERS
 from ..model.params import Interval
 from .device import parse_device
+from .foxglove import parse_foxglove
 from .mqtt import parse_mqtt
 from .schema import (
     BACKOFF_INITIAL_S,
@@ -48,7 +49,7 @@ from .tables import REQUIRED, Context, Table, check_exists, check_private, parse
 _HOST_RE: Final = re.compile(
     r"(?=.{1,253}\Z)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62}))*\.?"
 )
-ROOT_KEYS: Final = ("metrics", "bus", "mqtt")
+ROOT_KEYS: Final = ("metrics", "bus", "mqtt", "foxglove")
 _METRICS_KEYS: Final = ("address", "web_config", "page")
 _BUS_KEYS: Final = (
     "name",
@@ -93,7 +94,8 @@ def parse_config(text: str, source: Path | None = None) -> GatewayConfig:
     buses = tuple(parse_bus(ctx, path, item) for path, item in bus_items)
     check_unique_names(ctx, buses)
     mqtt = parse_mqtt(ctx, root)
-    return GatewayConfig(metrics=metrics, buses=buses, source=ctx.source, mqtt=mqtt)
+    foxglove = parse_foxglove(ctx, root, tuple(d.name for b in buses for d in b.devices))
+    return GatewayConfig(metrics=metrics, buses=buses, source=ctx.source, mqtt=mqtt, foxglove=foxglove)
 
 
 def _parse_host(value: str) -> str | None:

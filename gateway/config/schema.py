@@ -29,9 +29,9 @@ from ..model import FrontEnd, RatioFrontEnd, SensorParams, UnknownEffectError, p
 from ..model.conversion import Conversion
 from ..model.curves import CurveChannel, Drift
 from ..model.params import Interval
+from .foxglove import FoxgloveConfig
 from .layout import GridLayout
 from .limits import MAX_CHANNELS, MAX_PITCH_MM, MAX_POSITION_MM, PITCH_MM, POSITION_MM
-from .foxglove import FoxgloveConfig
 from .mqtt import MqttConfig
 from .regions import Region
 
