@@ -36,6 +36,7 @@ from ..config import (
     load_config,
 )
 from ..errors import ConfigError
+from ..foxglove.link import FoxgloveLink
 from ..metrics.event_loop import EventLoopCollector
 from ..metrics.exposition import SnapshotRegistry
 from ..metrics.server import MetricsServer
@@ -131,6 +132,15 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
     mqtt = MqttLink(registry)
     mqtt.apply(config)
     holder.subscribe(mqtt.on_snapshot, derive_now=lambda: mqtt.derivations)
+    foxglove = FoxgloveLink()
+    try:
+        foxglove.apply(config)
+    except OSError as exc:
+        log.error("%s", exc)
+        mqtt.stop()
+        server.stop()
+        return EXIT_CONFIG
+    holder.subscribe(foxglove.on_snapshot)
     commands: asyncio.Queue[str] = asyncio.Queue()
     loop = asyncio.get_running_loop()
     handled = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
@@ -149,6 +159,10 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
                 continue
             report = await poller.reload(new_config)
             mqtt.apply(new_config)
+            try:
+                foxglove.apply(new_config)
+            except OSError as exc:
+                log.error("%s; Foxglove is off until the next reload", exc)
             log.info(
                 "reloaded %s (%s): %d channels keep their creep state, %d reset",
                 config_path,
@@ -165,6 +179,7 @@ async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None,
             loop.remove_signal_handler(sig)
         await poller.stop()
         mqtt.stop()
+        foxglove.stop()
         server.stop()
         log.info("stopped")
     return 0

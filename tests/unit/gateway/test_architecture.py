@@ -30,6 +30,7 @@ ALLOWED: dict[str, set[str]] = {
     "metrics": {"errors", "textfile", "keys", "runtime"},
     "web": {"errors", "textfile", "keys", "runtime"},
     "mqtt": {"errors", "textfile", "keys", "config", "runtime"},
+    "foxglove": {"errors", "textfile", "keys", "config", "runtime"},
     "analysis": {"errors", "textfile", "atomic", "keys", "model", "config", "runtime"},
     "cli": {
         "errors",
@@ -42,6 +43,7 @@ ALLOWED: dict[str, set[str]] = {
         "runtime",
         "metrics",
         "mqtt",
+        "foxglove",
         "web",
         "analysis",
         "sim_device",
