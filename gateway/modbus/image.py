@@ -225,7 +225,10 @@ def decode_sample(device: DeviceLayout, image: RegisterImage) -> RawSample:
             device_time = ticks * clock.tick_s
     special = None
     if regs.frame is not None and regs.frame.special is not None:
-        special = _special_codes(regs.frame, image)
+        if isinstance(counts, np.ndarray) and counts.dtype == np.uint16:  # the raw registers
+            special = _special_table(regs.frame.special)[counts]
+        else:
+            special = _special_codes(regs.frame, image)
     return RawSample(
         counts,
         resistance,

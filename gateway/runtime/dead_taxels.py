@@ -64,6 +64,12 @@ class DeadTaxelTracker:
         self.region_names = region_names
         self.dead_after_s = float(dead_after_s)
         self._n_regions = len(region_names)
+        # the regions are runs of channels in order (as a device's regions are): per-region
+        # sums are ``reduceat`` over the runs' starts, without a scatter
+        present = np.unique(self.region_of)
+        self._runs = bool(np.all(np.diff(self.region_of) >= 0))
+        self._present = present
+        self._starts = np.searchsorted(self.region_of, present)
 
     def initial_state(self, n: int) -> DeadState:
         return DeadState(
@@ -82,7 +88,13 @@ class DeadTaxelTracker:
         v = np.asarray(values, dtype=np.float64)
         changed = v != state.last  # NaN (the first poll) compares unequal: everything "changed"
         polls = state.polls + 1
-        moved = np.bincount(self.region_of[changed], minlength=self._n_regions) > 0
+        moved = np.zeros(self._n_regions, dtype=np.int64)
+        if len(v) == 0:
+            pass
+        elif self._runs:
+            moved[self._present] = np.logical_or.reduceat(changed, self._starts)
+        else:
+            moved[np.unique(self.region_of[changed])] = 1
         region_moving = state.region_moving + moved
         # the region's moving polls since each channel last changed, counted by its neighbours
         still_since = np.where(changed, now_s, state.still_since_s)

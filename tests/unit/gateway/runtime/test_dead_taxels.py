@@ -138,6 +138,17 @@ def test_a_frozen_taxel_is_dead_after_dead_after_s_while_its_region_moves() -> N
     assert not dead.any()
 
 
+def test_regions_need_not_be_runs_of_channels() -> None:
+    # channels 0 and 2 in region "a", 1 and 3 in "b"; 2 frozen while 0 moves; b all still
+    tracker = DeadTaxelTracker(np.array([0, 1, 0, 1], dtype=np.intp), ("a", "b"), dead_after_s=1.0)
+    state = tracker.initial_state(4)
+    for k in range(12):
+        state, dead = tracker.update(state, np.array([k, 3, 5, 3], dtype=np.float64), 100.0 + 0.1 * k)
+    # frozen since poll 0: 1.1 s at poll 11
+    assert dead.tolist() == [False, False, True, False]
+    assert tracker.counts(dead) == {"a": 1, "b": 0}
+
+
 def test_an_idle_region_or_one_that_moved_only_briefly_has_no_dead_taxel() -> None:
     tracker = DeadTaxelTracker(np.array([0, 0, 0, 1, 1, 1], dtype=np.intp), ("a", "b"), dead_after_s=1.0)
     state = tracker.initial_state(6)

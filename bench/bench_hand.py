@@ -1,0 +1,102 @@
+"""The 1,062-taxel hand (profile ``dexhand-1062``): conversion time of one poll.
+
+One poll's registers (17 regions, every taxel moving, a few at special codes, a few frozen)
+are decoded and converted as the poller does (``decode_sample`` + ``DeviceProcessor.process``:
+special codes, the dead-taxel tracker, statuses, totals), back to back for
+``BENCH_SECONDS`` (default 5) seconds; goal <= 1 ms per poll. The dead-taxel tracker's step
+alone and the decoding are timed too. The profile's channels are uncalibrated (a ``ratio``
+front end): the physical model still runs on them and takes most of the time.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from gateway.config import parse_config
+from gateway.modbus.image import RegisterImage, decode_sample
+from gateway.runtime.dead_taxels import DeadTaxelTracker
+from gateway.runtime.processor import DeviceProcessor, dead_taxel_tracker
+
+SECONDS = float(os.environ.get("BENCH_SECONDS", "5"))
+GOAL_US = 1000.0
+HAND = """
+[[bus]]
+name = "hand"
+kind = "tcp"
+host = "127.0.0.1"
+port = 6000
+
+[[bus.device]]
+name = "hand"
+device_id = 1
+profile = "dexhand-1062"
+"""
+
+
+def _images(n: int, first: int, count: int = 64) -> list[RegisterImage]:
+    """``count`` polls of the hand's registers: a random walk in 100..30000, taxel 7 frozen,
+    taxel 20 at a special code."""
+    rng = np.random.default_rng(1)
+    values = rng.integers(100, 30000, size=n).astype(np.int64)
+    out = []
+    for _ in range(count):
+        values = np.clip(values + rng.integers(-50, 51, size=n), 100, 30000)
+        regs = values.astype(np.uint16)
+        regs[7] = 1234
+        regs[20] = 65535
+        out.append(RegisterImage.from_reads([("holding", first, regs)]))
+    return out
+
+
+def _per_poll_us(step: object, n_images: int) -> float:
+    assert callable(step)
+    polls = 0
+    start = time.perf_counter()
+    while time.perf_counter() - start < SECONDS:
+        step(polls % n_images)
+        polls += 1
+    return 1e6 * (time.perf_counter() - start) / polls
+
+
+def bench_conversion() -> None:
+    device = parse_config(HAND).buses[0].devices[0]
+    first = device.regions[0].address
+    images = _images(device.n_channels, first)
+    processor = DeviceProcessor(device, "hand", 1.0 / 30.0)
+    state = [processor.initial_state()]
+    clock = [100.0]
+
+    def step(k: int) -> None:
+        clock[0] += 1.0 / 30.0
+        raw = decode_sample(device, images[k])
+        _, state[0] = processor.process(state[0], raw, 1.7e9 + clock[0], clock[0])
+
+    us = _per_poll_us(step, len(images))
+    verdict = "ok" if us <= GOAL_US else "SLOWER than the goal"
+    print(
+        f"  one {device.n_channels}-channel poll ({len(device.regions)} regions), decode + conversion + "
+        f"special codes + dead taxels: {us:8.1f} us/poll (goal <= {GOAL_US:.0f} us: {verdict})"
+    )
+    decode_us = _per_poll_us(lambda k: decode_sample(device, images[k]), len(images))
+    print(f"  of which decoding the 17 blocks and their special codes: {decode_us:8.1f} us/poll")
+    tracker = dead_taxel_tracker(device, processor.index)
+    assert isinstance(tracker, DeadTaxelTracker)
+    values = [np.asarray(decode_sample(device, im).counts, dtype=np.float64) for im in images]
+    dead_state = [tracker.initial_state(device.n_channels)]
+
+    def track(k: int) -> None:
+        clock[0] += 1.0 / 30.0
+        dead_state[0], _ = tracker.update(dead_state[0], values[k], clock[0])
+
+    print(f"  the dead-taxel tracker's step alone: {_per_poll_us(track, len(values)):8.1f} us/poll")
+
+
+def main() -> None:
+    bench_conversion()
+
+
+if __name__ == "__main__":
+    main()
