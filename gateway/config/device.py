@@ -51,6 +51,7 @@ from .profiles import load_profile, merge_profile
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS, parse_baselines, parse_divider, parse_front_end, parse_layout
 from .regions import parse_regions
 from .schema import DEAD_AFTER_S, DEVICE_ID, MAX_CHANNELS, POSITION_MM, ChannelConfig, DeviceConfig
+from .status_words import parse_status_words
 from .tables import (
     REQUIRED,
     Context,
@@ -101,6 +102,7 @@ DEVICE_KEYS: Final = (
     "address_unit",
     "value_stride",
     "dead_after_s",
+    "status_word",
 )
 _MODEL_KEYS: Final = ("effects", "params", DEVICE_OVERRIDE_KEY)
 _CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params", OVERRIDE_KEY)
@@ -426,6 +428,12 @@ def _parse_device(
         profile=profile,
         output_drift=output_drift,
         regions=regions,
+        status_words=parse_status_words(
+            ctx,
+            table,
+            registers,
+            "byte" if regions and table.data.get("address_unit") == "byte" else "register",
+        ),
         dead_after_s=table.number(
             "dead_after_s", DEFAULT_DEAD_AFTER_S if regions else 0.0, DEAD_AFTER_S, " s (0: off)"
         ),

@@ -25,6 +25,7 @@ from ..modbus.register_map import (
     RegisterMap,
     config_word,
 )
+from ..modbus.status_word import StatusWord
 from ..model import FrontEnd, RatioFrontEnd, SensorParams, UnknownEffectError, parse_effects
 from ..model.conversion import Conversion
 from ..model.curves import CurveChannel, Drift
@@ -239,6 +240,8 @@ class DeviceConfig:
     #: the named sub-grids the channels come from, in channel order (``regions.Region``);
     #: () for a device whose channels are the one grid of ``layout``
     regions: tuple[Region, ...] = ()
+    #: named status words read with every poll (``config.status_words``)
+    status_words: tuple[StatusWord, ...] = ()
     #: seconds a taxel frozen while its region moves takes to read dead (0: not tracked;
     #: ``runtime.dead_taxels``)
     dead_after_s: float = 0.0

@@ -144,6 +144,28 @@ def _dead_taxels(device: str, dev: DeviceSnapshot, counters: DeviceCounters | No
         yield (device, region), float(count)
 
 
+def _status_bits(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
+    """Each named bit of each status word read: 1 set, 0 clear."""
+    for word in dev.status_words:
+        if word.value is not None:
+            for _, label, on, _ in word.bits:
+                yield (device, word.name, label), 1.0 if on else 0.0
+
+
+def _status_codes(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
+    """The value of each enumerated status word read, labelled with its code's name."""
+    for word in dev.status_words:
+        if word.value is not None and word.code is not None:
+            yield (device, word.name, word.code), float(word.value)
+
+
+def _status_errors(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
+    """1 where a status word read has an error bit set or an error code, else 0."""
+    for word in dev.status_words:
+        if word.value is not None:
+            yield (device, word.name), 1.0 if word.error else 0.0
+
+
 def _reads(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
     """Read requests attempted, count; nothing for a device without counters."""
     if counters is not None:
@@ -324,5 +346,27 @@ FAMILIES: Final[tuple[Family, ...]] = (
         "Device clock faults seen since the device was configured (count), by kind: stuck, backwards",
         ("device", "kind"),
         _clock_faults,
+    ),
+    Family(
+        "tactile_device_status_bit",
+        "gauge",
+        f"1 if the named bit of the device's status word is set, else 0 (dimensionless), {_FROM_POLL}",
+        ("device", "word", "bit"),
+        _status_bits,
+    ),
+    Family(
+        "tactile_device_status_code",
+        "gauge",
+        f"The value of the device's enumerated status word, labelled with its name (code), {_FROM_POLL}",
+        ("device", "word", "code"),
+        _status_codes,
+    ),
+    Family(
+        "tactile_device_status_error",
+        "gauge",
+        "1 if the device's status word has an error bit set or an error code, else 0 "
+        f"(dimensionless), {_FROM_POLL}",
+        ("device", "word"),
+        _status_errors,
     ),
 )

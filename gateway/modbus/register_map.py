@@ -625,4 +625,6 @@ def register_blocks(device: DeviceLayout, clock: bool = True) -> tuple[RegisterB
         )
     if regs.temperature_address is not None:
         blocks.append(RegisterBlock("temperature", "temperature", table, regs.temperature_address, 2 * n, 2))
+    for k, word in enumerate(getattr(device, "status_words", ())):  # ``status_word.StatusWord``s
+        blocks.append(RegisterBlock(f"status_word{k}", "status_word", word.table, word.address, 1, 1))
     return tuple(blocks)

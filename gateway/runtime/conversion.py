@@ -6,8 +6,10 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import replace
 
 from ..modbus.image import RegisterImage, RegisterSpace, decode_sample
+from ..modbus.status_word import read_status_words
 from .processor import DeviceProcessor, DeviceState
 from .snapshot import DeviceSnapshot
 
@@ -53,11 +55,15 @@ class Conversion:
         host_time_s: float,
         derive: Sequence[Callable[[DeviceSnapshot], object]],
     ) -> Iterator[tuple[DeviceSnapshot, DeviceState] | None]:
-        raw = decode_sample(processor.device, RegisterImage.from_reads(reads))
+        image = RegisterImage.from_reads(reads)
+        raw = decode_sample(processor.device, image)
         yield None
         tracked = processor.track(state, raw, wall_time_s, host_time_s)
         yield None
         result = processor.finish(tracked)
+        if processor.device.status_words:  # the device's named status words, with its forces
+            words = read_status_words(processor.device.status_words, image)
+            result = (replace(result[0], status_words=words), result[1])
         if derive:
             yield None
             for fn in derive:

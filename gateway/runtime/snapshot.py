@@ -23,6 +23,7 @@ from typing import Generic, TypeVar, overload
 import numpy as np
 from numpy.typing import NDArray
 
+from ..modbus.status_word import StatusWordReading
 from ..model import SensorModel
 from .counters import DeviceCounters
 
@@ -271,6 +272,8 @@ class DeviceSnapshot:
     dead: NDArray[np.bool_] | None = None
     #: dead taxels per region, every region (0 included); () when not tracked
     dead_by_region: tuple[tuple[str, int], ...] = ()
+    #: the device's named status words at this poll (``[[bus.device.status_word]]``), in order
+    status_words: tuple[StatusWordReading, ...] = ()
     _static: Once[FloatArray] = field(default_factory=Once, init=False, repr=False, compare=False)
     _derived: dict[object, Once[object]] = field(default_factory=dict, init=False, repr=False, compare=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False, compare=False)

@@ -14,11 +14,11 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Iterable, Sequence
-from typing import Any, Protocol, TypedDict
+from typing import Any, NotRequired, Protocol, TypedDict
 
 from ..runtime.counters import DeviceCounters
 from ..runtime.frame import DECIMALS, Frame, compact_json, frame_of
-from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
+from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, StatusWordReading, finite_or_none
 from .region_layout import RegionDescription, groups_json, regions_json
 
 #: Units of every quantity in the API, as listed with each device.
@@ -54,6 +54,20 @@ class PageFrame(TypedDict):
     polls_total: int
     reads_total: int
     read_errors_total: int
+    #: the device's named status words at this poll (``status_word_json``), when it has any
+    device_status: NotRequired[list[dict[str, Any]]]
+
+
+def status_word_json(word: StatusWordReading) -> dict[str, Any]:
+    """One status word read: its name, register value (None: not read), code label (an
+    enumerated word), whether it is in error, and each named bit (set, an error bit)."""
+    return {
+        "name": word.name,
+        "value": word.value,
+        "code": word.code,
+        "error": word.error,
+        "bits": [{"bit": b, "label": label, "on": on, "error": err} for b, label, on, err in word.bits],
+    }
 
 
 def cell_area_from_positions(x_mm: Iterable[float], y_mm: Iterable[float]) -> float | None:
@@ -160,7 +174,7 @@ def frame_json(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounter
     f = frame_of(source) if isinstance(source, DeviceSnapshot) else source
     cop = f.center_of_pressure_mm
     c = counters or DeviceCounters()
-    return {
+    out: PageFrame = {
         "device": f.device,
         "seq": seq,
         "t": f.host_time_s,
@@ -181,6 +195,9 @@ def frame_json(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounter
         "reads_total": c.reads_total,
         "read_errors_total": sum(c.read_errors_total.values()),
     }
+    if isinstance(source, DeviceSnapshot) and source.status_words:
+        out["device_status"] = [status_word_json(w) for w in source.status_words]
+    return out
 
 
 def encode_frame(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounters | None) -> bytes:
