@@ -83,12 +83,49 @@ class RegisterImage:
         return cls(tuple(blocks))
 
     def get(self, kind: RegisterSpace, address: int, count: int) -> NDArray[np.uint16] | None:
-        """The registers ``address .. address + count - 1`` or None when not read."""
+        """The registers ``address .. address + count - 1`` or None when not read; a range
+        longer than one read (a long block split into legal reads) is joined from the reads
+        that cover it end to end."""
         for b in self.blocks:
             if b.covers(kind, address, count):
                 start = address - b.address
                 return b.values[start : start + count]
-        return None
+        return self._joined(kind, address, count)
+
+    def gather(self, kind: RegisterSpace, addresses: NDArray[np.intp], block: int) -> NDArray[np.uint16]:
+        """The registers at ``addresses`` (ascending) from whichever reads hold them
+        (``DecodeError`` naming frame block ``block`` if one was not read)."""
+        lo, hi = int(addresses[0]), int(addresses[-1])
+        out = np.zeros(len(addresses), dtype=np.uint16)
+        filled = np.zeros(len(addresses), dtype=np.bool_)
+        for b in self.blocks:
+            end = b.address + len(b.values)
+            if b.kind != kind or b.address > hi or end <= lo:
+                continue
+            inside = (addresses >= b.address) & (addresses < end)
+            out[inside] = b.values[addresses[inside] - b.address]
+            filled |= inside
+        if not filled.all():
+            missing = int(addresses[~filled][0])
+            raise DecodeError(f"frame block {block}: {kind} register {missing} was not read")
+        return out
+
+    def _joined(self, kind: RegisterSpace, address: int, count: int) -> NDArray[np.uint16] | None:
+        parts: list[NDArray[np.uint16]] = []
+        at, end = address, address + count
+        while at < end:
+            b = next(
+                (b for b in self.blocks if b.kind == kind and b.address <= at < b.address + len(b.values)),
+                None,
+            )
+            if b is None:
+                return None
+            stop = min(end, b.address + len(b.values))
+            parts.append(b.values[at - b.address : stop - b.address])
+            at = stop
+        joined = np.concatenate(parts)
+        joined.setflags(write=False)
+        return joined
 
     def require(self, kind: RegisterSpace, address: int, count: int, what: str) -> NDArray[np.uint16]:
         regs = self.get(kind, address, count)
@@ -136,11 +173,13 @@ def decode_frame(frame: ValueFrame, image: RegisterImage) -> NDArray[np.uint16] 
     )
     parts: list[Any] = []
     for k, b in enumerate(frame.blocks):
-        words = image.require(
-            frame_space(frame.table, frame.vendor, b.row), b.address, frame.span(b), f"frame block {k}"
-        )
-        if frame.value_stride != frame.width:  # each value's registers, the rest skipped
-            words = words.reshape(-1)[_strided_index(b.values, frame.value_stride, frame.width)]
+        space = frame_space(frame.table, frame.vendor, b.row)
+        if frame.value_stride == frame.width:
+            words = image.require(space, b.address, frame.span(b), f"frame block {k}")
+        else:  # each value's registers, the rest skipped (and perhaps not read)
+            index = _strided_index(b.values, frame.value_stride, frame.width)
+            whole = image.get(space, b.address, frame.span(b))
+            words = whole[index] if whole is not None else image.gather(space, b.address + index, k)
         parts.append(
             words if plain else decode_values(words, frame.value_type, frame.order, frame.scale, frame.offset)
         )

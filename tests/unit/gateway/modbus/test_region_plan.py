@@ -96,3 +96,16 @@ def test_strided_values_decode_into_their_regions_channels() -> None:
     assert sample.counts is not None
     assert sample.counts.tolist() == [100, 200, 300, 400, 500]
     assert [r.count for r in read_plan(dev, 125)] == [5, 3]
+
+
+def test_a_block_split_over_two_reads_decodes_whole() -> None:
+    # the nail (3009..3104) straddles the reads 3000..3124 and 3125..3184
+    finger = device([("tip", 3000, 3, 3), ("nail", 3009, 12, 8), ("pad", 3105, 10, 8)])
+    plan = read_plan(finger, 100)
+    assert [(r.address, r.count) for r in plan] == [(3000, 100), (3100, 85)]
+    values = np.arange(185, dtype=np.uint16) + 7
+    image = RegisterImage.from_reads(
+        [(r.kind, r.address, values[r.address - 3000 : r.end - 2999]) for r in plan]
+    )
+    sample = decode_sample(finger, image)
+    assert sample.counts is not None and sample.counts.tolist() == values.tolist()
