@@ -95,6 +95,7 @@ SUBSTITUTIONS: list[tuple[str, str, str]] = [
 CONFIG_SUBSTITUTIONS: list[tuple[str, str, str]] = [
     (r"^port = 50(20|21)\b", "port = {device}", "the simulator's ports"),
     (r'"127\.0\.0\.1:9830"', '"127.0.0.1:{metrics}"', "the metrics port"),
+    (r"^port = 8765\b", "port = 0", "Foxglove's port ([foxglove]): any free one"),
 ]
 #: A configuration without a [metrics] table serves on 127.0.0.1:9830: it gets this one first.
 METRICS_TABLE = '[metrics]\naddress = "127.0.0.1:{metrics}"\n\n'
