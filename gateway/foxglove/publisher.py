@@ -50,6 +50,7 @@ from foxglove.websocket import ChannelView, Client, ServerListener, WebSocketSer
 from ..config import GatewayConfig
 from ..config.foxglove import FoxgloveConfig
 from ..config.schema import DeviceConfig
+from ..runtime.priority import polls_fast, yield_to_poll_loop
 from ..runtime.snapshot import IN_CONTACT, DeviceSnapshot, GatewaySnapshot
 from .grids import RegionPlace, region_grids, region_places
 
@@ -326,6 +327,8 @@ class FoxglovePublisher:
 
     # ------------------------------------------------------------------ the publishing thread
     def _run(self) -> None:
+        if polls_fast(self._config):
+            yield_to_poll_loop()  # a fast bus: its answers before these frames
         while True:
             with self._cond:
                 while not self._queue and not self._stopping:
