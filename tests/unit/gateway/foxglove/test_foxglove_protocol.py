@@ -116,3 +116,67 @@ def test_a_taken_port_is_an_oserror() -> None:
         config = dataclasses.replace(hand_config(), foxglove=FoxgloveConfig(port=port))
         with pytest.raises(OSError):
             FoxglovePublisher(config).start()
+
+
+HAND = """
+[[bus]]
+name = "hand"
+kind = "tcp"
+host = "127.0.0.1"
+port = 6000
+
+[[bus.device]]
+name = "hand"
+device_id = 1
+profile = "dexhand-1062"
+"""
+
+
+async def test_the_1062_taxel_hand_arrives_as_17_grids_each_taxel_once() -> None:
+    from gateway.config import parse_config
+
+    config = dataclasses.replace(parse_config(HAND), foxglove=FoxgloveConfig(port=0))
+    regions = [r.name for r in config.buses[0].devices[0].regions]
+    topics = [f"/tactile/hand/{name}" for name in regions]
+    pub = FoxglovePublisher(config).start()
+    snaps = [hand_snapshot(n=1062)]
+
+    def poke() -> None:
+        snaps.append(dataclasses.replace(snaps[-1]))
+        pub.on_snapshot(GatewaySnapshot.build({"hand": snaps[-1]}, {}, len(snaps)))
+
+    try:
+        async with aiohttp.ClientSession() as session, connect(session, pub.port) as ws:
+            client = FoxgloveClient(ws)
+            await client.advertised({*topics, "/tactile/hand/summary"})
+            await client.subscribe([*topics, "/tactile/hand/summary"])
+            got = await client.collect({*topics, "/tactile/hand/summary"}, timeout_s=20.0, poke=poke)
+    finally:
+        pub.stop()
+    assert len(regions) == 17
+    values = np.concatenate([decode_grid(got[t][1]).values.ravel() for t in topics])
+    np.testing.assert_array_equal(np.sort(values), 0.5 + np.arange(1062, dtype=np.float32))
+    summary = json.loads(got["/tactile/hand/summary"][1])
+    assert sum(summary["group_force_n"].values()) == pytest.approx(sum(0.5 + k for k in range(1062)))
+
+
+def test_drops_are_said_at_once_then_at_most_every_10_s_and_at_stop(caplog: pytest.LogCaptureFixture) -> None:
+    config = dataclasses.replace(hand_config(), foxglove=FoxgloveConfig(port=0, queue_frames=1))
+    pub = FoxglovePublisher(config)
+    pub._devices = {"hand": object()}  # type: ignore[dict-item]  # served, never started: nothing drains
+    feed = lambda k: pub.on_snapshot(GatewaySnapshot.build({"hand": hand_snapshot()}, {}, k))  # noqa: E731
+    feed(1)
+    feed(2)
+    pub._report_drops(100.0)
+    feed(3)
+    pub._report_drops(105.0)  # 5 s later: not yet
+    pub._report_drops(110.5)  # 10.5 s after the first report
+    feed(4)
+    pub._report_drops(111.0, at_stop=True)
+    said = [r.getMessage() for r in caplog.records if "dropped" in r.getMessage()]
+    assert [s.split(" (")[0] for s in said] == [
+        "foxglove: 1 frame(s) dropped",
+        "foxglove: 1 frame(s) dropped",
+        "foxglove: 1 frame(s) dropped",
+    ]
+    assert "3 in all" in said[-1]
