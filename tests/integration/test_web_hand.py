@@ -40,17 +40,47 @@ port = 6000
 name = "hand"
 device_id = 1
 profile = "dexhand-1062"
+{words}"""
+#: a state code and the error bits of two fingers (addresses in the profile's bytes)
+WORDS = """
+[[bus.device.status_word]]
+name = "index-state"
+address = 2000
+codes = { 0 = "idle", 1 = "grasping", 2 = "force reached", 3 = "stall", 4 = "fault" }
+error_codes = [3, 4]
+
+[[bus.device.status_word]]
+name = "index-errors"
+address = 2002
+errors = { 0 = "stall", 1 = "over-temperature", 2 = "over-current", 3 = "motor", 4 = "communication" }
+
+[[bus.device.status_word]]
+name = "thumb-state"
+address = 2004
+codes = { 0 = "idle", 1 = "grasping", 2 = "force reached", 3 = "stall", 4 = "fault" }
+error_codes = [3, 4]
+
+[[bus.device.status_word]]
+name = "thumb-errors"
+address = 2006
+errors = { 0 = "stall", 1 = "over-temperature", 2 = "over-current", 3 = "motor", 4 = "communication" }
 """
+#: the words' register values at the poll: index force reached, over-temperature and
+#: over-current set (0b00110); thumb grasping, no error
+WORD_VALUES = (2, 0b00110, 1, 0)
 #: the map's canvas side for a device made of regions (px) and the page's margin around the drawing
 MAP_PX = 600
 MARGIN_PX = 12
 #: loads (N at the centre, mm) pressed on the hand: the index fingertip, the thumb's tip, the palm
 LOADS = ((83.75, 2.5, 1.8), (113.75, 42.5, 1.2), (46.25, 83.75, 2.5), (58.75, 53.75, 0.9))
 SIGMA_MM = 3.0
+#: the one poll's interval (s): the page calls a device stale after 5 intervals without a frame,
+#: 25 s here, so the one frame served stays up on a busy machine until the screenshot
+POLL_INTERVAL_S = 5.0
 
 
-def hand_config() -> DeviceConfig:
-    return parse_config(HAND).buses[0].devices[0]
+def hand_config(words: str = WORDS) -> DeviceConfig:
+    return parse_config(HAND.format(words=words)).buses[0].devices[0]
 
 
 def hand_snapshot(dev: DeviceConfig) -> DeviceSnapshot:
@@ -70,10 +100,11 @@ def hand_snapshot(dev: DeviceConfig) -> DeviceSnapshot:
         channel_names=tuple(c.name for c in dev.channels), x_mm=x, y_mm=y,
         resistance_ohm=np.full(len(x), np.nan), force_n=f, static_estimate=None,
         reference_force_n=np.full(len(x), np.nan), status=status, up=True, timestamp_s=now,
-        last_success_timestamp_s=now, device_time_s=None, poll_interval_s=1 / 30,
+        last_success_timestamp_s=now, device_time_s=None, poll_interval_s=POLL_INTERVAL_S,
         total_force_n=total, center_of_pressure_mm=(float(f @ x / total), float(f @ y / total)),
         channels_in_contact=int((f > 0).sum()), contact_area_mm2=float((f > 0).sum() * 6.25),
         peak_channel=dev.channels[peak_k].name, peak_force_n=float(f[peak_k]),
+        status_words=tuple(w.read(v) for w, v in zip(dev.status_words, WORD_VALUES, strict=True)),
     )  # fmt: skip
 
 
@@ -185,6 +216,23 @@ async def test_the_page_draws_the_hand_by_regions_with_sums(browser: Any, tmp_pa
         assert groups["palm"] > 1.0 and groups["little"] == 0.0
         assert math.isclose(sum(groups.values()), snap.total_force_n, rel_tol=1e-9)
 
+        # the status words: a code chip per state word, a chip per named bit, set error bits red
+        assert await page.locator("#device-status .word").count() == 4
+        assert (
+            await page.locator('.word[data-word="index-state"] .bit.code').text_content() == "force reached"
+        )
+        assert await page.locator('.word[data-word="thumb-state"] .bit.code').text_content() == "grasping"
+        lit = page.locator('.word[data-word="index-errors"] .bit.on.error')
+        assert sorted(await lit.all_text_contents()) == ["over-current", "over-temperature"]
+        assert await page.locator('.word[data-word="index-errors"] .bit').count() == 5
+        assert await page.locator('.word[data-word="thumb-errors"] .bit.on').count() == 0
+        assert await page.locator(".word.error").count() == 1  # index-errors alone is in error
+        red = await page.locator('.word[data-word="index-errors"] [data-bit="over-temperature"]').evaluate(
+            "(el) => getComputedStyle(el).backgroundColor"
+        )
+        assert red == "rgb(208, 48, 48)"
+
+        assert await page.text_content("#state") == "up"
         shot = tmp_path / "hand.png"
         await page.screenshot(path=str(shot))
         assert shot.stat().st_size > 10_000

@@ -460,6 +460,49 @@ function buildSums(d) {
   $("sums-body").replaceChildren(...rows);
 }
 
+// the device's status words: an enumerated word's code, each named bit (set bits lit, error
+// bits and error codes red when set); rebuilt only when a word changes
+function updateStatusWords(f) {
+  const words = (f && f.device_status) || [];
+  const box = $("device-status");
+  const key = JSON.stringify(words);
+  if (box.dataset.key === key) return;
+  box.dataset.key = key;
+  $("device-status-title").hidden = words.length === 0;
+  box.replaceChildren(...words.map((w) => {
+    const row = document.createElement("div");
+    row.className = `word${w.error ? " error" : ""}`;
+    row.dataset.word = w.name;
+    const name = document.createElement("span");
+    name.className = "word-name";
+    name.textContent = w.name;
+    row.append(name);
+    if (w.value === null) {
+      const chip = document.createElement("span");
+      chip.className = "bit unread";
+      chip.textContent = "not read";
+      row.append(chip);
+    }
+    if (w.code !== null) {
+      const chip = document.createElement("span");
+      chip.className = `bit code on${w.error ? " error" : ""}`;
+      chip.dataset.code = w.code;
+      chip.textContent = w.code;
+      row.append(chip);
+    }
+    for (const b of w.bits) {
+      const chip = document.createElement("span");
+      chip.className = `bit${b.on ? " on" : ""}${b.error ? " error" : ""}`;
+      chip.dataset.bit = b.label;
+      chip.dataset.on = b.on ? "1" : "0";
+      chip.title = `bit ${b.bit}${b.error ? " (error)" : ""}: ${b.on ? "set" : "clear"}`;
+      chip.textContent = b.label;
+      row.append(chip);
+    }
+    return row;
+  }));
+}
+
 function updateSums(d) {
   const f = d.frame;
   if (!f || !(d.layout.groups || []).length) return;
@@ -762,6 +805,7 @@ function render() {
       drawMap($("map"), d, { margin: 12, smooth: $("smooth").checked, trail: true, numbers: view.numbers });
       placeRegions(d, $("map"), 12);
       updateSums(d);
+      updateStatusWords(d.frame);
       drawHistory($("history"), d);
       updateText(d, now);
     } else {
