@@ -36,7 +36,6 @@ from ..config import (
     load_config,
 )
 from ..errors import ConfigError
-from ..foxglove.link import FoxgloveLink
 from ..metrics.event_loop import EventLoopCollector
 from ..metrics.exposition import SnapshotRegistry
 from ..metrics.server import MetricsServer
@@ -114,6 +113,8 @@ def _page(
 
 async def serve(config_path: Path, config: GatewayConfig, web: WebConfig | None, page_on: bool = True) -> int:
     """Poll and serve until SIGTERM/SIGINT; SIGHUP reloads ``config_path``."""
+    from ..foxglove.link import FoxgloveLink  # the SDK takes 40 ms to import: only for `run`
+
     holder = SnapshotHolder()
     registry = SnapshotRegistry(holder.get)
     registry.register(EventLoopCollector(asyncio.get_running_loop()))
