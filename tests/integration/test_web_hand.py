@@ -162,6 +162,17 @@ LUMA_AT_JS = """([x, y]) => {
 }"""
 
 
+#: pixels of a canvas within 30 of the outlines' grey, #8c96a3, in every channel
+OUTLINE_PIXELS_JS = """(c) => {
+  const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+  let n = 0;
+  for (let i = 0; i < d.length; i += 4) {
+    if (Math.abs(d[i] - 140) < 30 && Math.abs(d[i + 1] - 150) < 30 && Math.abs(d[i + 2] - 163) < 30) n++;
+  }
+  return n;
+}"""
+
+
 async def test_the_page_draws_the_hand_by_regions_with_sums(browser: Any, tmp_path: Path) -> None:
     async with hand_page() as (server, dev, snap):
         page = await browser.new_page(viewport={"width": 1400, "height": 1000})
@@ -238,4 +249,14 @@ async def test_the_page_draws_the_hand_by_regions_with_sums(browser: Any, tmp_pa
         assert shot.stat().st_size > 10_000
         if target := os.environ.get("TACTILE_SCREENSHOT_HAND"):
             shutil.copyfile(shot, target)
+
+        # the overview's card draws the hand by regions too: its outlines lit on the black map
+        await page.evaluate("() => { location.hash = '#overview'; }")
+        card = page.locator('.card[data-device="hand"] canvas')
+        await card.wait_for(state="visible", timeout=10_000)
+        lit = await card.evaluate(OUTLINE_PIXELS_JS)
+        # the boxes' perimeters add up to 1,250 mm, about 1,900 px at the card's 1.5 px/mm; about
+        # half are drawn in the grey itself (1,041 seen), the rest split by anti-aliasing; none
+        # without the outlines (the cells are black or the scale's colours)
+        assert lit > 600, lit
         assert errors == []
