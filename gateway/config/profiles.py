@@ -42,9 +42,10 @@ PROFILE_KEYS: Final = (
     "region",
     "address_unit",
     "value_stride",
+    "status_word",
 )
-#: Tables merged key by key with the device's own (``setup`` and ``region`` are arrays: the
-#: device's own replaces the profile's; ``actions`` merge by name).
+#: Tables merged key by key with the device's own (``setup``, ``region`` and ``status_word``
+#: are arrays: the device's own replaces the profile's; ``actions`` merge by name).
 MERGED_TABLES: Final = ("registers", "clock", "front_end", "layout", "checks", "model", "frame", "actions")
 _SUFFIX: Final = ".toml"
 #: The profile's tables whose keys do not depend on a kind: an unknown key in one of them (e.g.

@@ -4,6 +4,8 @@ with their labels, exported in /metrics, hand-checked bit by bit."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from prometheus_client import CollectorRegistry, generate_latest
@@ -140,3 +142,24 @@ def test_bad_status_words_are_refused_precisely(words: str, message: str) -> Non
     with pytest.raises(ConfigError) as exc:
         hand(words)
     assert message in str(exc.value), str(exc.value)
+
+
+def test_a_profile_may_name_status_words_and_a_device_replaces_them(tmp_path: Path) -> None:
+    (tmp_path / "hand.toml").write_text(
+        DEVICE.split("[[bus.device]]")[1]
+        .split("\n", 1)[1]
+        .replace('name = "hand"\ndevice_id = 1\nchannels = 4\n', "channels = 4\n")
+        .replace("[bus.device.", "[")
+        .replace("[[bus.device.", "[[")
+        .format(words=WORDS.replace("[[bus.device.", "[[")),
+        encoding="utf-8",
+    )
+    head = (
+        DEVICE.split("[[bus.device]]")[0]
+        + '[[bus.device]]\nname = "hand"\ndevice_id = 1\nprofile = "hand.toml"\n'
+    )
+    dev = parse_config(head, source=tmp_path / "gateway.toml").buses[0].devices[0]
+    assert [w.name for w in dev.status_words] == ["index-state", "index-errors"]
+    own = head + '[[bus.device.status_word]]\nname = "mine"\naddress = 20\nbits = { 0 = "on" }\n'
+    dev = parse_config(own, source=tmp_path / "gateway.toml").buses[0].devices[0]
+    assert [(w.name, w.address) for w in dev.status_words] == [("mine", 10)]
