@@ -50,6 +50,7 @@ CSP = (
 STATIC_FILES: dict[str, str] = {
     "index.html": "text/html; charset=utf-8",
     "app.js": "text/javascript; charset=utf-8",
+    "regions.js": "text/javascript; charset=utf-8",
     "style.css": "text/css; charset=utf-8",
 }
 KEEPALIVE_S = 15.0
