@@ -8,6 +8,7 @@ Examples::
     tactile-sim run --tls 0.0.0.0:802 --cert server.crt --key server.key
     tactile-sim run --map rawgrid --channels 36 --tcp 127.0.0.1:5022
     tactile-sim run --map skin60 --rtu /dev/ttyUSB0 --baud 4000000 --scenario cycles
+    tactile-sim run --map hand --tcp 127.0.0.1:6000 --layout register --base-offset 100 --dead thumb-pad
     tactile-sim scenarios
     tactile-sim fsr-record fsr.csv --runs 3 --protocol calibration --seed 2
     tactile-sim fsr-record slow.csv --preset real-like --protocol slow-loading --runs 1
@@ -214,7 +215,37 @@ def fsr_record_cmd(
     show_default=True,
     help="Register map: docs/register-map.md, docs/register-map-rawgrid.md or "
     "docs/register-map-skin60.md (skin60: 60 points, function 0x42; --channels, --columns, "
-    "--pitch-mm do not apply); dfrobot: a DFRobot-style 6x6 board (TCP only, no physics).",
+    "--pitch-mm do not apply); dfrobot: a DFRobot-style 6x6 board (TCP only, no physics); "
+    "hand: a 1,062-taxel robot hand, docs/register-map-hand.md.",
+)
+@click.option(
+    "--layout",
+    "hand_layout",
+    type=click.Choice(["byte", "register"]),
+    default="byte",
+    show_default=True,
+    help="hand only: the public block addresses are byte addresses (register = byte/2) or registers.",
+)
+@click.option(
+    "--base-offset", type=int, default=0, show_default=True, help="hand only: shift every taxel block."
+)
+@click.option("--dead", default="", help="hand only: taxels reading 0, e.g. thumb-pad,palm:17.")
+@click.option("--frozen", default="", help="hand only: taxels frozen, e.g. middle-tip or index-pad:3=1200.")
+@click.option(
+    "--stuck", default="", help="hand only: taxels stuck at the rail (saturation code), e.g. palm:5."
+)
+@click.option(
+    "--saturation-code",
+    type=click.IntRange(0xFF00, 0xFFFF),
+    default=0xFFFF,
+    show_default=True,
+    help="hand only: the raw value of a saturated taxel.",
+)
+@click.option(
+    "--joint-error",
+    "joint_errors",
+    multiple=True,
+    help="hand only: JOINT:BIT set from the start, e.g. index:stall.",
 )
 @click.option(
     "--log-requests",
@@ -264,6 +295,13 @@ def run_cmd(
     record_path: str | None,
     record_period: float,
     stop_after: float | None,
+    hand_layout: str,
+    base_offset: int,
+    dead: str,
+    frozen: str,
+    stuck: str,
+    saturation_code: int,
+    joint_errors: tuple[str, ...],
 ) -> None:
     """Serve simulated arrays until SIGINT/SIGTERM (or --stop-after)."""
     transport = _transport(tcp, rtu, rtu_tcp, tls)
@@ -275,6 +313,30 @@ def run_cmd(
         raise click.BadParameter("must be > 0", param_hint="--record-period")
     ids = _device_ids(device_ids)
     cols = columns if columns is not None else min(channels, math.ceil(math.sqrt(channels)))
+    if register_map == "hand":
+        if transport.kind == "tls":
+            raise click.UsageError("--map hand is served over --tcp, --rtu-tcp or --rtu")
+        try:
+            from .hand_cli import make_hand
+
+            hand = make_hand(
+                scenario,
+                hand_layout,
+                base_offset,
+                dead,
+                frozen,
+                stuck,
+                saturation_code,
+                joint_errors,
+                seed=seed,
+                speed=speed,
+                noise_lsb=noise_lsb,
+                device_id=ids[0],
+            )
+            asyncio.run(_serve_hand(hand, transport, baud, line_timing, turnaround_ms / 1000.0, stop_after))
+        except _USER_ERRORS as exc:
+            raise click.ClickException(str(exc)) from None
+        return
     if register_map == "dfrobot":
         if transport.kind != "tcp":
             raise click.UsageError("--map dfrobot is served over --tcp")
@@ -362,6 +424,32 @@ async def _serve_dfrobot(t: _Transport, device_id: int, stop_after: float | None
             "map dfrobot",
             err=True,
         )
+        sys.stderr.flush()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), timeout=stop_after)
+    click.echo("tactile-sim: stopped", err=True)
+
+
+async def _serve_hand(
+    hand: Any, t: _Transport, baud: int, line_timing: bool, turnaround_s: float, stop_after: float | None
+) -> None:
+    """The hand (``sim_device.hand``) until SIGINT or SIGTERM (or ``stop_after`` wall seconds)."""
+    from .hand_cli import describe
+    from .hand_server import serve_hand_serial, serve_hand_tcp
+
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, stop.set)
+    serving = (
+        serve_hand_serial(hand, t.device, baud, line_timing, turnaround_s)
+        if t.kind == "rtu"
+        else serve_hand_tcp(hand, t.host, t.port, "rtu" if t.kind == "rtu-tcp" else "socket")
+    )
+    async with serving as server:
+        where = t.device if t.kind == "rtu" else f"{server.host}:{server.port}"
+        click.echo(f"tactile-sim: serving {describe(hand)} on {t.kind} {where}", err=True)
         sys.stderr.flush()
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(stop.wait(), timeout=stop_after)

@@ -24,7 +24,9 @@ an array of the default map and answer on the bus themselves (their own function
   ``docs/register-map-skin60.md``, a 60-point skin read with function code 0x42;
 - ``"dfrobot"`` (``sim_device.dfrobot_map``, ``tactile-sim run --map dfrobot --tcp ...``): a
   DFRobot-style 6 x 6 board's public register map, a press crossing it (no physics; for
-  ``scan`` and bring-up).
+  ``scan`` and bring-up);
+- ``"hand"`` (``sim_device.hand``, ``tactile-sim run --map hand``): ``docs/register-map-hand.md``,
+  a robot hand's 1,062 taxels in 17 regions and its joints, in holding registers.
 
 Pure python/numpy: ``pymodbus_device`` turns the ``Block`` declarations into pymodbus data.
 """
@@ -55,7 +57,7 @@ PRODUCT_CODE = "TSA-SIM"
 PRODUCT_NAME = "Simulated MIS piezoresistive sensor array"
 
 #: Devices with a vendor protocol over a default-map array (``sim_device.skin60``).
-VENDOR_MAPS: tuple[str, ...] = ("skin60", "dfrobot")
+VENDOR_MAPS: tuple[str, ...] = ("skin60", "dfrobot", "hand")
 
 
 def package_version() -> str:
