@@ -83,3 +83,57 @@ async def test_a_poll_of_the_hand_carries_its_status_words_to_the_page_and_metri
     assert 'tactile_device_status_bit{bit="motor",device="hand",word="index-errors"} 0.0' in metrics
     assert 'tactile_device_status_code{code="fault",device="hand",word="index-state"} 4.0' in metrics
     assert 'tactile_device_status_error{device="hand",word="thumb-errors"} 0.0' in metrics
+
+
+#: the hand simulator's six joints' status codes and error bits (its map: holding registers
+#: 1028..1033 and 1034..1039), in the profile's bytes
+SIM_WORDS = "".join(
+    f"""
+[[bus.device.status_word]]
+name = "{joint}-status"
+address = {2 * (1028 + j)}
+codes = {{ 0 = "idle", 1 = "grasping", 2 = "force reached", 3 = "stall", 4 = "fault" }}
+error_codes = [3, 4]
+
+[[bus.device.status_word]]
+name = "{joint}-errors"
+address = {2 * (1034 + j)}
+errors = {{ 0 = "stall", 1 = "over-temperature", 2 = "over-current", 3 = "motor", 4 = "communication" }}
+"""
+    for j, joint in enumerate(("little", "ring", "middle", "index", "thumb-bend", "thumb-rotate"))
+)
+
+
+async def test_the_hand_simulator_s_status_and_error_bits_reach_the_page() -> None:
+    """The independent hand simulator (``sim_device.hand``) with an over-temperature on the
+    index finger: its status code reads fault (an error bit other than stall) and its error
+    word has exactly that bit set; the other fingers read no error."""
+    from sim_device.hand import HandDevice
+    from sim_device.hand_server import serve_hand_tcp
+
+    hand = HandDevice()
+    hand.set_error("index", "over-temperature")
+    async with serve_hand_tcp(hand) as sim:
+        config = parse_config(HAND.format(port=sim.port) + SIM_WORDS)
+        holder = SnapshotHolder()
+        hub = FrameHub(holder)
+        page = WebPage(hub, device_configs=lambda: [config.buses[0].devices[0]])
+        server = MetricsServer(
+            make_registry(holder.get, CollectorRegistry()), "127.0.0.1", 0, None, page.install
+        )
+        with server:
+            async with Poller(config, holder):
+                await until(lambda: (e := hub.latest("hand")) is not None and e.seq > 0 and e.snapshot.up,
+                            20, "a good poll of the hand simulator")  # fmt: skip
+                frame = json.loads(get(server.base_url + "/api/devices/hand/frame"))
+                metrics = get(server.base_url + "/metrics").decode()
+    words = {w["name"]: w for w in frame["device_status"]}
+    assert len(words) == 12
+    assert (words["index-status"]["code"], words["index-status"]["error"]) == ("fault", True)
+    assert {b["label"] for b in words["index-errors"]["bits"] if b["on"]} == {"over-temperature"}
+    for joint in ("little", "ring", "middle", "thumb-bend", "thumb-rotate"):
+        assert not words[f"{joint}-errors"]["error"] and not words[f"{joint}-status"]["error"], joint
+    assert (
+        'tactile_device_status_bit{bit="over-temperature",device="hand",word="index-errors"} 1.0' in metrics
+    )
+    assert 'tactile_device_status_error{device="hand",word="ring-errors"} 0.0' in metrics
