@@ -5,7 +5,7 @@ are decoded and converted as the poller does (``decode_sample`` + ``DeviceProces
 special codes, the dead-taxel tracker, statuses, totals), back to back for
 ``BENCH_SECONDS`` (default 5) seconds; goal <= 1 ms per poll. The dead-taxel tracker's step
 alone and the decoding are timed too. The profile's channels are uncalibrated (a ``ratio``
-front end): the physical model still runs on them and takes most of the time.
+front end): no model runs for them (their force would be thrown away).
 """
 
 from __future__ import annotations

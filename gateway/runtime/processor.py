@@ -220,7 +220,8 @@ class DeviceProcessor:
         )
         by_effects: dict[tuple[str, ...], list[int]] = {}
         for k, c in enumerate(chans):
-            if c.conversion is None and not self.output:
+            # an uncalibrated channel's force would be thrown away: no model runs for it
+            if c.conversion is None and not self.output and not device.needs_calibration(c):
                 by_effects.setdefault(tuple(c.effects), []).append(k)
         self.groups: tuple[tuple[NDArray[np.intp], SensorModel], ...] = tuple(
             (np.array(ks, dtype=np.intp), SensorModel(effects, [chans[k].params for k in ks]))
@@ -511,7 +512,9 @@ class DeviceProcessor:
         if tracked.unzeroed is not None:
             status = np.where(tracked.unzeroed & (status == _CHANNEL_OK), np.int8(_CHANNEL_NO_ZERO), status)
         if self._uncalibrated is not None:
-            status = np.where(self._uncalibrated & VALUED[status], np.int8(_CHANNEL_UNCALIBRATED), status)
+            # a reading (the read-out's verdict is OK), no model: uncalibrated
+            readable = self._uncalibrated & (base == _CHANNEL_OK)
+            status = np.where(readable, np.int8(_CHANNEL_UNCALIBRATED), status)
         special = None if raw.special is None else raw.special[self._pick]
         if special is not None and special.any():  # declared codes: statuses, never forces
             status = _SPECIAL_STATUS[special * np.int8(len(ChannelStatus)) + status]
