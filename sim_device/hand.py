@@ -40,6 +40,8 @@ FRAME_PERIOD_S = 1.0 / FRAME_RATE_HZ
 FEEDBACK_OHM = 1000.0
 FULL_SCALE = 0xFFFF
 ANGLE_RATE_PER_S = 1000.0
+#: Bound on the joint steps of one catch-up (a long idle is crossed in coarser steps).
+MAX_JOINT_STEPS = 3000
 #: Regions whose force each joint feels.
 JOINT_GROUPS = ("little", "ring", "middle", "index", "thumb", "thumb")
 
@@ -187,19 +189,33 @@ class HandDevice:
         self._refresh()
         return [self._group_force_cn(g) for g in JOINT_GROUPS]
 
-    def _force_reached(self, j: int, forces: Sequence[int]) -> bool:
+    def _force_reached(self, j: int, forces: Sequence[int] | NDArray[np.int64]) -> bool:
         return self.force_set_cn[j] > 0 and forces[j] >= self.force_set_cn[j]
 
+    def _group_forces_cn(self, times_s: NDArray[np.float64]) -> NDArray[np.int64]:
+        """Each joint's force (cN) at device times ``times_s``, shape (T, joints)."""
+        by_group = {g: np.zeros(times_s.shape[0]) for g in hm.PUBLIC_BLOCK_BYTES}
+        for r in hm.REGIONS:
+            by_group[r.group] += self.arrays[r.name].scenario.force_n(times_s).sum(axis=1)
+        cn = np.stack([by_group[g] for g in JOINT_GROUPS], axis=1) * 100.0
+        return np.minimum(np.rint(cn), 0xFFFF).astype(np.int64)
+
     def _move_joints(self, until_s: float) -> None:
-        dt = max(until_s - self._joint_t, 0.0)
-        self._joint_t = max(until_s, self._joint_t)
-        forces = [self._group_force_cn(g) for g in JOINT_GROUPS]
-        for j in range(hm.N_JOINTS):
-            if self.errors[j] or self._force_reached(j, forces):
-                continue
-            target, now = float(self.angle_set[j]), self.angle_actual[j]
-            step = ANGLE_RATE_PER_S * dt
-            self.angle_actual[j] = min(now + step, target) if target > now else max(now - step, target)
+        """Step the joints frame by frame (at most ``MAX_JOINT_STEPS`` steps) up to ``until_s``."""
+        dt = until_s - self._joint_t
+        if dt <= 0.0:
+            return
+        steps = min(max(round(dt / FRAME_PERIOD_S), 1), MAX_JOINT_STEPS)
+        times = self._joint_t + dt * np.arange(1, steps + 1) / steps
+        forces = self._group_forces_cn(times)
+        step = ANGLE_RATE_PER_S * dt / steps
+        for k in range(steps):
+            for j in range(hm.N_JOINTS):
+                if self.errors[j] or self._force_reached(j, forces[k]):
+                    continue
+                target, now = float(self.angle_set[j]), self.angle_actual[j]
+                self.angle_actual[j] = min(now + step, target) if target > now else max(now - step, target)
+        self._joint_t = until_s
 
     def status_codes(self) -> list[int]:
         self._refresh()
