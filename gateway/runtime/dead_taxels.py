@@ -3,7 +3,8 @@
 A taxel whose raw value stays exactly the same (at a rail or anywhere: a converter that no
 longer updates it, a broken trace read as 0) while the other taxels of its region keep
 changing is dead once it has been frozen for ``dead_after_s`` seconds, provided its region
-changed in at least half of the polls since it froze (``MIN_MOVING_FRACTION``). A region
+changed at least ``MIN_NEIGHBOUR_MOVES`` times since it froze, the last time within half of
+``dead_after_s`` (so whatever the poll rate against the device's refresh rate). A region
 whose taxels are all still (nothing touches it, a noise-free idle reading) has no dead
 taxel: a whole dead region cannot be told from an idle one. A dead taxel is alive again as
 soon as its value changes.
@@ -24,11 +25,12 @@ from numpy.typing import NDArray
 
 from ..config.limits import DEFAULT_DEAD_AFTER_S
 
-__all__ = ["DEFAULT_DEAD_AFTER_S", "MIN_MOVING_FRACTION", "DeadState", "DeadTaxelTracker"]
+__all__ = ["DEFAULT_DEAD_AFTER_S", "MIN_NEIGHBOUR_MOVES", "DeadState", "DeadTaxelTracker"]
 
-#: A frozen taxel's region must have changed in at least this fraction of the polls since it
-#: froze: neighbours that moved once, long ago, do not make a still taxel dead.
-MIN_MOVING_FRACTION: Final = 0.5
+#: A frozen taxel's region must have changed at least this many polls since it froze, the
+#: last within half of ``dead_after_s``: neighbours that moved once, long ago, do not make a
+#: still taxel dead.
+MIN_NEIGHBOUR_MOVES: Final = 3
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -38,14 +40,14 @@ BoolArray = NDArray[np.bool_]
 @dataclass(frozen=True)
 class DeadState:
     """What the tracker carries between polls (one entry per tracked channel): the last
-    value, when it last changed (s), the poll count and the region's moving-poll count when it
-    last changed, and per region the polls in which some taxel changed."""
+    value, when it last changed (s) and the region's moving-poll count then; per region the
+    polls in which some taxel changed and when one last did (s)."""
 
     last: FloatArray
     still_since_s: FloatArray
-    poll_at_change: IntArray
     moving_at_change: IntArray
     region_moving: IntArray
+    region_moved_s: FloatArray
     polls: int = 0
 
 
@@ -76,8 +78,8 @@ class DeadTaxelTracker:
             np.full(n, np.nan),
             np.full(n, np.nan),
             np.zeros(n, dtype=np.int64),
-            np.zeros(n, dtype=np.int64),
             np.zeros(self._n_regions, dtype=np.int64),
+            np.full(self._n_regions, np.nan),
         )
 
     def update(
@@ -96,18 +98,17 @@ class DeadTaxelTracker:
         else:
             moved[np.unique(self.region_of[changed])] = 1
         region_moving = state.region_moving + moved
+        region_moved_s = np.where(moved > 0, now_s, state.region_moved_s)
         # the region's moving polls since each channel last changed, counted by its neighbours
         still_since = np.where(changed, now_s, state.still_since_s)
-        poll_at = np.where(changed, polls, state.poll_at_change)
-        moving_at = np.where(changed, region_moving[self.region_of], state.moving_at_change)
-        new = DeadState(v, still_since, poll_at, moving_at, region_moving, polls)
+        moving_now = region_moving[self.region_of]
+        moving_at = np.where(changed, moving_now, state.moving_at_change)
+        new = DeadState(v, still_since, moving_at, region_moving, region_moved_s, polls)
         if state.polls == 0:
             return new, np.zeros(len(v), dtype=np.bool_)
-        frozen_s = now_s - still_since
-        neighbours = region_moving[self.region_of] - moving_at
-        dead = (frozen_s >= self.dead_after_s) & (neighbours >= MIN_MOVING_FRACTION * (polls - poll_at))
-        dead &= neighbours > 0
-        return new, dead
+        lively = (now_s - region_moved_s) <= self.dead_after_s / 2.0  # a region that moves lately
+        dead = (now_s - still_since >= self.dead_after_s) & (moving_now - moving_at >= MIN_NEIGHBOUR_MOVES)
+        return new, dead & lively[self.region_of]
 
     def counts(self, dead: BoolArray) -> dict[str, int]:
         """Dead taxels per region name (every region, 0 included)."""

@@ -138,6 +138,21 @@ def test_a_frozen_taxel_is_dead_after_dead_after_s_while_its_region_moves() -> N
     assert not dead.any()
 
 
+def test_polls_faster_than_the_device_refreshes_still_find_it() -> None:
+    # the device refreshes every 5th poll (30 Hz frames polled at 150 Hz): taxel 1 frozen
+    tracker = DeadTaxelTracker(np.zeros(3, dtype=np.intp), ("r",), dead_after_s=1.0)
+    state = tracker.initial_state(3)
+    dt = 1.0 / 150.0
+    flagged_at = None
+    for k in range(300):
+        frame = k // 5
+        state, dead = tracker.update(state, np.array([frame, 9, frame % 7], dtype=np.float64), 100.0 + k * dt)
+        if dead[1] and flagged_at is None:
+            flagged_at = k
+    # frozen since poll 0: 1 s later is poll 150
+    assert flagged_at == 150
+
+
 def test_regions_need_not_be_runs_of_channels() -> None:
     # channels 0 and 2 in region "a", 1 and 3 in "b"; 2 frozen while 0 moves; b all still
     tracker = DeadTaxelTracker(np.array([0, 1, 0, 1], dtype=np.intp), ("a", "b"), dead_after_s=1.0)
