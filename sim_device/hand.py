@@ -8,7 +8,7 @@ measured by a transimpedance stage into a 16-bit converter, so the raw value is 
 to the taxel's conductance: ``raw = round(65535 R_f / r + noise)`` with ``R_f =
 FEEDBACK_OHM`` (1 kohm), 0 unloaded (r is infinite), rising with pressure. Values from 0xFF00
 up are the hand's codes, never pressures: a taxel whose conversion reaches 0xFF00 (r below
-about 1.004 kohm, some 30 N on a taxel) reads the saturation code (0xFFFF by default).
+about 1.004 kohm, some 24 N on a nominal taxel) reads the saturation code (0xFFFF by default).
 
 Field faults: a dead taxel reads 0, a frozen one a constant, a stuck one the saturation code
 (stuck at the rail), from the first frame on.
