@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 from pymodbus.client import AsyncModbusTcpClient
+from pymodbus.framer import FramerType
 from waiting import ManualClock
 
 from sim_device import hand_map as hm
@@ -193,3 +194,22 @@ async def test_the_command_line_serves_the_layout_it_was_given() -> None:
     finally:
         proc.terminate()
         await asyncio.wait_for(proc.wait(), timeout=10)
+
+
+async def test_rtu_framing_over_tcp_reads_a_finger_and_writes_a_set_point() -> None:
+    clock = ManualClock()
+    hand = HandDevice("palm-held", clock=clock)
+    index_tip = hand.layout.region_address(hm.region("index-tip"))
+    async with serve_hand_tcp(hand, framer="rtu") as server:
+        client = AsyncModbusTcpClient(
+            "127.0.0.1", port=server.port, framer=FramerType.RTU, timeout=2.0, retries=0
+        )
+        assert await client.connect()
+        try:
+            words, reads = await read_block(client, index_tip, 185)
+            assert reads == 2 and words[:9] == hand.taxels("index-tip").tolist()
+            assert not (await client.write_registers(hm.HR_ANGLE_SET + 4, [250, 750], device_id=1)).isError()
+            rr = await client.read_holding_registers(hm.HR_ANGLE_SET + 4, count=2, device_id=1)
+            assert rr.registers == [250, 750]
+        finally:
+            client.close()

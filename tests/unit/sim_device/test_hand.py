@@ -233,3 +233,27 @@ def test_hand_scenario_file(tmp_path: Path) -> None:
 def test_unknown_scenario_names_the_hand_ones() -> None:
     with pytest.raises(ScenarioError, match="grasp, slide, palm-held"):
         load_hand_scenario("graps")
+
+
+def test_slide_moves_the_contact_along_the_palm() -> None:
+    clock = Clock()
+    h = hand("slide", clock)
+    columns = []
+    for t_s in (4.0, 12.0, 20.0):  # pressed in by 2 s, then sliding at 1 mm/s along the 8 columns
+        clock.now_s = t_s
+        force = h.true_force_n("palm").reshape(14, 8)
+        columns.append(int(np.argmax(force.sum(axis=0))))
+        assert h.taxels("palm").reshape(14, 8)[:, columns[-1]].max() > 0
+    assert columns[0] < columns[1] < columns[2]
+    assert h.taxels("thumb-pad").max() == 0
+
+
+def test_palm_held_is_loaded_and_settled_from_the_start() -> None:
+    clock = Clock()
+    h = hand("palm-held", clock)
+    start = h.taxels("palm").astype(float)
+    clock.now_s = 60.0
+    later = h.taxels("palm").astype(float)
+    # settled: no creep left, the values stay within a few per cent over a minute
+    assert start.min() > 300 and np.all(np.abs(later - start) <= 0.03 * start)
+    assert all(h.taxels(r.name).max() == 0 for r in hm.REGIONS if r.name != "palm")
