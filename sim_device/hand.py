@@ -116,6 +116,9 @@ class HandDevice:
         self._frozen_specs = [*self.scenario.frozen, *frozen]
         self._frozen = self._masks(self._frozen_specs)
         self._frozen_values: dict[str, NDArray[np.int64]] = {}
+        self._where = {
+            self.layout.region_address(r) + i: (r.name, i) for r in hm.REGIONS for i in range(r.size)
+        }
         self._frame = -1
         self._taxels: dict[str, NDArray[np.int64]] = {}
         self.angle_set = [0] * hm.N_JOINTS
@@ -277,11 +280,10 @@ class HandDevice:
         return out
 
     def _taxel_at(self, address: int) -> int:
-        for r in hm.REGIONS:
-            first = self.layout.region_address(r)
-            if first <= address < first + r.size:
-                return int(self._taxels[r.name][address - first])
-        raise HandWriteError(2, f"holding register {address} is not mapped")
+        where = self._where.get(address)
+        if where is None:
+            raise HandWriteError(2, f"holding register {address} is not mapped")
+        return int(self._taxels[where[0]][where[1]])
 
     def write(self, address: int, values: Sequence[int]) -> None:
         """Apply a write of holding registers, all or nothing; ``HandWriteError`` if refused."""
