@@ -17,8 +17,8 @@ import numpy as np
 
 from gateway.config import parse_config
 from gateway.modbus.image import RegisterImage, decode_sample
-from gateway.runtime.dead_taxels import DeadTaxelTracker
-from gateway.runtime.processor import DeviceProcessor, dead_taxel_tracker
+from gateway.runtime.dead_taxels import DeadTaxelTracker, tracker_for
+from gateway.runtime.processor import DeviceProcessor
 
 SECONDS = float(os.environ.get("BENCH_SECONDS", "5"))
 GOAL_US = 1000.0
@@ -82,7 +82,7 @@ def bench_conversion() -> None:
     )
     decode_us = _per_poll_us(lambda k: decode_sample(device, images[k]), len(images))
     print(f"  of which decoding the 17 blocks and their special codes: {decode_us:8.1f} us/poll")
-    tracker = dead_taxel_tracker(device, processor.index)
+    tracker = tracker_for(device, processor.index)
     assert isinstance(tracker, DeadTaxelTracker)
     values = [np.asarray(decode_sample(device, im).counts, dtype=np.float64) for im in images]
     dead_state = [tracker.initial_state(device.n_channels)]

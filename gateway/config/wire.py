@@ -26,11 +26,11 @@ from ..modbus.register_map import (
     FrameTable,
     RegisterCheck,
     RegisterMap,
-    SpecialCodes,
     ValueFrame,
     register_blocks,
     status_span,
 )
+from ..modbus.special_codes import SpecialCodes
 from ..modbus.vendor_fc import VendorRead
 from ..model.params import Interval
 from .regions import RegionSet

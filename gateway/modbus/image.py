@@ -29,11 +29,11 @@ from .register_map import (
     FrameQuantity,
     RegisterKind,
     RegisterSpace,
-    SpecialCodes,
     ValueFrame,
     frame_space,
     status_registers,
 )
+from .special_codes import SpecialCodes
 
 #: Each quantity's base unit (a frame decoded in it is not scaled).
 _BASE_UNITS = {

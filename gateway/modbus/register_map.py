@@ -23,13 +23,11 @@ of a named action (a device zero). Nothing else is ever written.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Final, Protocol, TypeVar
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import Final, Protocol, TypeVar
 
 from ..errors import ConfigError
 from ..keys import Choice, choice_of
+from .special_codes import SpecialCodes
 from .vendor_fc import VendorRead
 
 __all__ = [
@@ -62,7 +60,6 @@ __all__ = [
     "RegisterKind",
     "RegisterMap",
     "RegisterSpace",
-    "SpecialCodes",
     "ValueFrame",
     "config_word",
     "frame_space",
@@ -279,50 +276,6 @@ class FrameBlock:
     address: int
     values: int
     row: int | None = None
-
-
-#: What a special code reads as: nothing special, the sensor's saturation, an error code.
-SPECIAL_NONE: Final = 0
-SPECIAL_SATURATED: Final = 1
-SPECIAL_ERROR: Final = 2
-
-
-@dataclass(frozen=True)
-class SpecialCodes:
-    """Raw values (the registers' integer, before scale and offset) that are codes, not
-    readings: ``saturated`` values and those from ``saturated_from`` up read status
-    saturated, ``error`` values and those from ``error_from`` up status error; a listed value
-    wins over a range, saturation over error. Never a force."""
-
-    saturated: tuple[int, ...] = ()
-    error: tuple[int, ...] = ()
-    saturated_from: int | None = None
-    error_from: int | None = None
-
-    def classify(self, raw: NDArray[np.integer[Any]]) -> NDArray[np.int8]:
-        """``SPECIAL_NONE``, ``SPECIAL_SATURATED`` or ``SPECIAL_ERROR`` per raw value."""
-        out = np.zeros(raw.shape, dtype=np.int8)
-        if self.error_from is not None:
-            out[raw >= self.error_from] = SPECIAL_ERROR
-        if self.saturated_from is not None:
-            out[raw >= self.saturated_from] = SPECIAL_SATURATED
-        if self.error:
-            out[np.isin(raw, self.error)] = SPECIAL_ERROR
-        if self.saturated:
-            out[np.isin(raw, self.saturated)] = SPECIAL_SATURATED
-        return out
-
-    def describe(self) -> str:
-        parts = []
-        if self.saturated:
-            parts.append(f"{', '.join(map(str, self.saturated))} saturated")
-        if self.saturated_from is not None:
-            parts.append(f">= {self.saturated_from} saturated")
-        if self.error:
-            parts.append(f"{', '.join(map(str, self.error))} error")
-        if self.error_from is not None:
-            parts.append(f">= {self.error_from} error")
-        return "; ".join(parts)
 
 
 @dataclass(frozen=True)

@@ -23,14 +23,26 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from ..config import DeviceConfig
 from ..config.limits import DEFAULT_DEAD_AFTER_S
+from ..modbus.image import RawSample
 
-__all__ = ["DEFAULT_DEAD_AFTER_S", "MIN_NEIGHBOUR_MOVES", "DeadState", "DeadTaxelTracker"]
+__all__ = [
+    "DEFAULT_DEAD_AFTER_S",
+    "MIN_NEIGHBOUR_MOVES",
+    "NO_COUNTS",
+    "DeadState",
+    "DeadTaxelTracker",
+    "tracker_for",
+]
 
 #: A frozen taxel's region must have changed at least this many polls since it froze, the
 #: last within half of ``dead_after_s``: neighbours that moved once, long ago, do not make a
 #: still taxel dead.
 MIN_NEIGHBOUR_MOVES: Final = 3
+
+#: Dead taxels by region of a device that tracks none.
+NO_COUNTS: Final[tuple[tuple[str, int], ...]] = ()
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -110,7 +122,35 @@ class DeadTaxelTracker:
         dead = (now_s - still_since >= self.dead_after_s) & (moving_now - moving_at >= MIN_NEIGHBOUR_MOVES)
         return new, dead & lively[self.region_of]
 
+    def step(
+        self, state: DeadState | None, raw: RawSample, pick: slice | NDArray[np.int64], now_s: float | None
+    ) -> tuple[DeadState, BoolArray, tuple[tuple[str, int], ...]]:
+        """``update`` on a poll's raw values (counts, resistances or the device's own output) of
+        the tracked channels ``pick``, with the dead taxels counted by region."""
+        values = next(
+            v
+            for v in (raw.counts, raw.resistance_ohm, raw.output_force_n, raw.output_pressure_kpa)
+            if v is not None
+        )[pick]
+        start = state or self.initial_state(len(self.region_of))
+        new, dead = self.update(start, values, 0.0 if now_s is None else now_s)
+        return new, dead, tuple(self.counts(dead).items())
+
     def counts(self, dead: BoolArray) -> dict[str, int]:
         """Dead taxels per region name (every region, 0 included)."""
         per = np.bincount(self.region_of[dead], minlength=self._n_regions)
         return {name: int(c) for name, c in zip(self.region_names, per, strict=True)}
+
+
+def tracker_for(device: DeviceConfig, index: NDArray[np.int64]) -> DeadTaxelTracker | None:
+    """The tracker of a device's enabled channels ``index``, by region (a device without
+    regions is one region, ``all``); None when the device tracks none (``dead_after_s = 0``)."""
+    if not device.dead_after_s > 0.0:
+        return None
+    if not device.regions:
+        return DeadTaxelTracker(np.zeros(len(index), dtype=np.intp), ("all",), device.dead_after_s)
+    region_of = np.empty(device.n_channels, dtype=np.intp)
+    for k, region in enumerate(device.regions):
+        region_of[region.channel_slice] = k
+    names = tuple(r.name for r in device.regions)
+    return DeadTaxelTracker(region_of[index], names, device.dead_after_s)

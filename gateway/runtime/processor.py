@@ -46,15 +46,15 @@ from numpy.typing import NDArray
 from ..config import ChannelConfig, DeviceConfig, Encoding
 from ..errors import DecodeError
 from ..modbus.image import RawSample
+from ..modbus.special_codes import SPECIAL_ERROR, SPECIAL_SATURATED
 from ..model import ModelState, RatioFrontEnd, SensorModel
 from ..model.curves import CurveChannel, CurveSet, CurveState, Drift, LineCurve
 from .baseline import BaselineCorrection
 from .clock import NO_CLOCK_HISTORY, ClockHealth, time_step
 from .converters import Converter, CurveConverter, PhysicsConverter, Step
-from .dead_taxels import DeadState, DeadTaxelTracker
+from .dead_taxels import NO_COUNTS, DeadState, tracker_for
 from .snapshot import (
     VALUED,
-    ChannelStatus,
     DeviceSnapshot,
     StaticEstimate,
     array_quantities,
@@ -101,33 +101,6 @@ class DeviceState:
     curve_state: CurveState | None = None
     #: the dead-taxel tracker's state (``runtime.dead_taxels``; None: none yet)
     dead: DeadState | None = None
-
-
-def dead_taxel_tracker(device: DeviceConfig, index: NDArray[np.int64]) -> DeadTaxelTracker | None:
-    """The tracker of a device's enabled channels ``index``, by region (a device without
-    regions is one region, ``all``); None when the device tracks none (``dead_after_s = 0``)."""
-    if not device.dead_after_s > 0.0:
-        return None
-    if not device.regions:
-        return DeadTaxelTracker(np.zeros(len(index), dtype=np.intp), ("all",), device.dead_after_s)
-    region_of = np.empty(device.n_channels, dtype=np.intp)
-    for k, region in enumerate(device.regions):
-        region_of[region.channel_slice] = k
-    names = tuple(r.name for r in device.regions)
-    return DeadTaxelTracker(region_of[index], names, device.dead_after_s)
-
-
-#: The status of a channel by special code x len(ChannelStatus) + status: a declared code
-#: (1 saturated, 2 error) replaces the status; 0 keeps it.
-_SPECIAL_STATUS = frozen_copy(
-    np.concatenate(
-        [
-            np.arange(len(ChannelStatus), dtype=np.int8),
-            np.full(len(ChannelStatus), _CHANNEL_SATURATED, dtype=np.int8),
-            np.full(len(ChannelStatus), _CHANNEL_ERROR, dtype=np.int8),
-        ]
-    )
-)
 
 
 def state_arrays(state: ModelState) -> list[FloatArray]:
@@ -262,7 +235,7 @@ class DeviceProcessor:
         uncalibrated = np.array([device.needs_calibration(c) for c in chans], dtype=np.bool_)
         self._uncalibrated = frozen_copy(uncalibrated) if uncalibrated.any() else None
         self._relative = device.encoding is Encoding.ADC and isinstance(device.front_end, RatioFrontEnd)
-        self._dead = dead_taxel_tracker(device, self.index)
+        self._dead = tracker_for(device, self.index)
 
     def _tare(self, r_model: FloatArray) -> FloatArray:
         """``r_model`` with each baseline channel's excess conductance taken off."""
@@ -515,18 +488,18 @@ class DeviceProcessor:
             # a reading (the read-out's verdict is OK), no model: uncalibrated
             readable = self._uncalibrated & (base == _CHANNEL_OK)
             status = np.where(readable, np.int8(_CHANNEL_UNCALIBRATED), status)
-        special = None if raw.special is None else raw.special[self._pick]
-        if special is not None and special.any():  # declared codes: statuses, never forces
-            status = _SPECIAL_STATUS[special * np.int8(len(ChannelStatus)) + status]
-        dead_state, dead = tracked.state.dead, None
-        dead_by_region: tuple[tuple[str, int], ...] = ()
+        special = None if raw.special is None or not raw.special.any() else raw.special[self._pick]
+        if special is not None:  # declared codes: statuses, never forces
+            status = np.where(special == SPECIAL_SATURATED, np.int8(_CHANNEL_SATURATED), status)
+            status = np.where(special == SPECIAL_ERROR, np.int8(_CHANNEL_ERROR), status)
+        dead_state, dead, dead_by_region = tracked.state.dead, None, NO_COUNTS
         if self._dead is not None:
-            dead_state, dead, dead_by_region = self._dead_taxels(tracked)
-            if dead.any():
-                status = np.where(dead, np.int8(_CHANNEL_ERROR), status)
+            now_s = tracked.state.last_host_time_s
+            dead_state, dead, dead_by_region = self._dead.step(tracked.state.dead, raw, self._pick, now_s)
+            status = np.where(dead, np.int8(_CHANNEL_ERROR), status)
         valued = VALUED[status]
         force = np.where(valued, tracked.force_n, np.nan)
-        if special is not None and special.any():
+        if special is not None:
             force = np.where(special != 0, np.nan, force)
         reference = self._no_values
         if raw.reference_force_n is not None:
@@ -583,22 +556,6 @@ class DeviceProcessor:
         )
         s = tracked.state
         return snap, replace(s, last=snap, dead=dead_state)
-
-    def _dead_taxels(
-        self, tracked: TrackedSample
-    ) -> tuple[DeadState, NDArray[np.bool_], tuple[tuple[str, int], ...]]:
-        """The dead-taxel tracker's step on this poll's raw values (``runtime.dead_taxels``)."""
-        assert self._dead is not None
-        raw = tracked.raw
-        values = next(
-            v
-            for v in (raw.counts, raw.resistance_ohm, raw.output_force_n, raw.output_pressure_kpa)
-            if v is not None
-        )[self._pick]
-        state = tracked.state.dead or self._dead.initial_state(len(self.channels))
-        now_s = tracked.state.last_host_time_s
-        new, dead = self._dead.update(state, values, 0.0 if now_s is None else now_s)
-        return new, dead, tuple(self._dead.counts(dead).items())
 
     def _clock_fallback(self, raw: RawSample, clock: ClockHealth) -> str | None:
         """Why a device whose map names a clock is timed by the host clock (None if it is not)."""
