@@ -172,6 +172,11 @@ def _region_lines(dev: DeviceConfig, requests: int) -> list[str]:
         return []
     out = [f"    {_plural(len(dev.regions), 'region')}, a frame takes {_plural(requests, 'request')}:"]
     out.extend(f"      {region.describe()}" for region in dev.regions)
+    if dev.dead_after_s > 0.0:
+        out.append(
+            f"    dead taxels: one frozen for {dev.dead_after_s:g} s while its region moves reads error "
+            f"(`poll-once --for {2 * dev.dead_after_s:g}` lists them by region)"
+        )
     return out
 
 

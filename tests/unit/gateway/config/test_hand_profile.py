@@ -73,3 +73,7 @@ def test_check_config_lists_the_regions_and_the_requests_a_frame_takes(tmp_path:
     assert "17 regions" in result.output
     assert "palm (palm): 14 x 8 at register 2450, channels 950..1061" in result.output
     assert "off the grid" not in result.output
+    assert (
+        "dead taxels: one frozen for 10 s while its region moves reads error "
+        "(`poll-once --for 20` lists them by region)" in result.output
+    )
