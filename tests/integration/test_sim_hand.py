@@ -165,6 +165,7 @@ async def test_saturation_dead_frozen_status_and_set_points(tmp_path: Path) -> N
             client.close()
 
 
+@pytest.mark.slow  # starts a simulator process
 async def test_the_command_line_serves_the_layout_it_was_given() -> None:
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     args = ["--map", "hand", "--tcp", "127.0.0.1:0", "--layout", "register", "--base-offset", "100"]
