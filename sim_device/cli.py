@@ -313,9 +313,17 @@ def run_cmd(
         raise click.BadParameter("must be > 0", param_hint="--record-period")
     ids = _device_ids(device_ids)
     cols = columns if columns is not None else min(channels, math.ceil(math.sqrt(channels)))
+    hand_options = hand_layout != "byte" or base_offset or dead or frozen or stuck or joint_errors
+    if register_map != "hand" and (hand_options or saturation_code != 0xFFFF):
+        raise click.UsageError(
+            "--layout, --base-offset, --dead, --frozen, --stuck, --saturation-code and --joint-error "
+            "are only used with --map hand"
+        )
     if register_map == "hand":
         if transport.kind == "tls":
             raise click.UsageError("--map hand is served over --tcp, --rtu-tcp or --rtu")
+        if record_path or log_requests:
+            raise click.UsageError("--record and --log-requests are not used with --map hand")
         try:
             from .hand_cli import make_hand
 
@@ -332,6 +340,9 @@ def run_cmd(
                 speed=speed,
                 noise_lsb=noise_lsb,
                 device_id=ids[0],
+                world_effects=parse_world_effects(world_effects),
+                param_spread=not no_spread,
+                sensor_noise_rel=sensor_noise,
             )
             asyncio.run(_serve_hand(hand, transport, baud, line_timing, turnaround_ms / 1000.0, stop_after))
         except _USER_ERRORS as exc:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from . import hand_map as hm
 from .hand import HandDevice
@@ -23,6 +24,7 @@ def make_hand(
     speed: float,
     noise_lsb: float,
     device_id: int,
+    **array_options: Any,
 ) -> HandDevice:
     """The hand the options describe; ``ValueError`` (or ``ScenarioError``) with a precise message."""
     hand = HandDevice(
@@ -36,6 +38,7 @@ def make_hand(
         frozen=parse_taxel_specs(frozen, "--frozen", allow_value=True),
         stuck=parse_taxel_specs(stuck, "--stuck"),
         device_id=device_id,
+        **array_options,
     )
     for item in joint_errors:
         joint, sep, bit = item.partition(":")

@@ -257,3 +257,30 @@ def test_palm_held_is_loaded_and_settled_from_the_start() -> None:
     # settled: no creep left, the values stay within a few per cent over a minute
     assert start.min() > 300 and np.all(np.abs(later - start) <= 0.03 * start)
     assert all(h.taxels(r.name).max() == 0 for r in hm.REGIONS if r.name != "palm")
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "message"),
+    [
+        (["--layout", "register"], 2, "only used with --map hand"),
+        (["--map", "skin60", "--dead", "palm"], 2, "only used with --map hand"),
+        (
+            ["--map", "hand", "--record", "x.csv"],
+            2,
+            "--record and --log-requests are not used with --map hand",
+        ),
+        (["--map", "hand", "--dead", "thumb-pads"], 1, "--dead: no region 'thumb-pads'"),
+        (["--map", "hand", "--frozen", "palm:112"], 1, "--frozen: palm has taxels 0..111, not 112"),
+        (["--map", "hand", "--base-offset", "-600"], 1, "overlaps the control registers 1000..1039"),
+        (["--map", "hand", "--joint-error", "index"], 1, "is not JOINT:BIT"),
+        (["--map", "hand", "--scenario", "graps"], 1, "or a hand scenario (grasp, slide, palm-held)"),
+    ],
+)
+def test_command_line_refuses_bad_hand_options_precisely(args: list[str], code: int, message: str) -> None:
+    from click.testing import CliRunner
+
+    from sim_device.cli import main
+
+    result = CliRunner().invoke(main, ["run", *args, "--stop-after", "0"])
+    assert result.exit_code == code, result.output
+    assert message in result.output and "Traceback" not in result.output
