@@ -6,6 +6,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -23,17 +24,22 @@ from ..config.calibration_file import check_calibration_file
 from ..config.install import Installed, check_install_target, install_calibration
 from ..errors import ConfigError, RecordError
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
+from .calibrate_batch import batch_records, check_out_dir, run_batch
 from .common import parse_assignments
 
 
 @click.command("calibrate")
-@click.argument(
-    "record_path", metavar="RECORD.csv", required=False, type=click.Path(dir_okay=False, path_type=Path)
-)
+@click.argument("record_paths", metavar="RECORD.csv", nargs=-1, type=click.Path(path_type=Path))
 @click.option("--channel", "channel_names", multiple=True, help="channel to calibrate (default: all)")
 @click.option("--effects", default="tunneling,contact,creep", show_default=True, help="model effects")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE", help="prior value of a parameter")
-@click.option("--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), help="calibration TOML")
+@click.option(
+    "--out",
+    "out_path",
+    type=click.Path(path_type=Path),
+    help="calibration TOML; with several records (a folder, a glob, or more than one RECORD.csv): the "
+    "folder for one <record stem>.toml each and summary.csv, summary.json",
+)
 @click.option(
     "--model",
     type=click.Choice([m.value for m in CalibrationModel]),
@@ -126,7 +132,7 @@ from .common import parse_assignments
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object and nothing else")
 @click.option("--force", "overwrite", is_flag=True, help="replace --out even if it is not a calibration file")
 def calibrate_cmd(
-    record_path: Path,
+    record_paths: tuple[Path, ...],
     channel_names: tuple[str, ...],
     effects: str,
     params: tuple[str, ...],
@@ -157,7 +163,38 @@ def calibrate_cmd(
 
     ``--install CONFIG.toml [--device NAME]`` names the calibration in the device's configuration,
     so that the gateway reads it; keys of the configuration that contradict it are listed and
-    nothing is installed, unless ``--replace-overrides`` drops them."""
+    nothing is installed, unless ``--replace-overrides`` drops them.
+
+    Several records (a folder of them, a glob, or more than one RECORD.csv) need ``--out DIR``:
+    each record's calibration is written as ``DIR/<record stem>.toml``, with ``DIR/summary.csv``
+    and ``DIR/summary.json`` (one line per channel; a record that failed is one line with its
+    error, and the others go on). Exit status of such a batch: 0 when every record was
+    calibrated, 1 when any failed, 2 for a usage error (nothing calibrated)."""
+    records = batch_records(record_paths)
+    if records is not None:
+        _batch(
+            records,
+            out_path,
+            channel_names,
+            effects,
+            params,
+            model,
+            objective,
+            force_offset,
+            as_name,
+            jobs,
+            progress,
+            as_json,
+            plot_dir,
+            update_path,
+            install_path,
+            known,
+            first_s,
+        )
+        return
+    record_path = record_paths[0] if record_paths else None
+    if out_path is not None and out_path.is_dir():
+        raise click.BadParameter(f"File '{out_path}' is a directory.", param_hint="'--out'")
     if install_path is None and (device_name is not None or replace_overrides):
         raise click.UsageError("--device and --replace-overrides go with --install CONFIG.toml")
     if install_path is not None:
@@ -266,6 +303,59 @@ def calibrate_cmd(
     if install_path is not None and out_path is not None:
         _check_effects(results, rename, out_path, install_path)
         _install(out_path, install_path, device_name, replace_overrides, as_json=False)
+
+
+def _batch(
+    records: list[Path],
+    out_path: Path | None,
+    channel_names: tuple[str, ...],
+    effects: str,
+    params: tuple[str, ...],
+    model: str,
+    objective: str,
+    force_offset: str,
+    as_name: str | None,
+    jobs: int | None,
+    progress: bool | None,
+    as_json: bool,
+    plot_dir: Path | None,
+    update_path: Path | None,
+    install_path: Path | None,
+    known: tuple[str, ...],
+    first_s: float | None,
+) -> None:
+    """Several records: one calibration each in ``--out DIR`` and a summary (``calibrate_batch``)."""
+    if update_path or install_path or plot_dir or known or first_s is not None:
+        raise click.UsageError(
+            "several records take neither --update, --install, --plots, --known nor --first-s: "
+            "calibrate them into --out DIR, then install or update each file alone"
+        )
+    if as_name is not None and not as_name.strip():
+        raise click.UsageError("--as needs a non-empty device channel name")
+    out_dir = check_out_dir(out_path)
+    try:
+        chosen = parse_effects(effects)
+        prior = SensorParams().with_overrides(parse_assignments(params, "--param"))
+    except (UnknownEffectError, ParameterError) as exc:
+        raise click.UsageError(str(exc)) from None
+    show = (sys.stderr.isatty() and not as_json) if progress is None else progress
+
+    def fit_channel(ch: Any, record_path: Path, metadata: Any) -> Calibration:
+        return calibrate(
+            ch,
+            chosen,
+            prior,
+            record_name=str(record_path),
+            metadata=metadata,
+            objective=OBJECTIVE_OPTIONS[objective],
+            force_offset=force_offset,
+            jobs=jobs,
+            progress=Progress(f"{record_path} channel {ch.name!r}") if show else None,
+        )
+
+    code = run_batch(records, out_dir, fit_channel, channel_names, as_name, model, as_json)
+    if code:
+        sys.exit(code)
 
 
 def update_calibration(
