@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Final
 
+import numpy as np
 import orjson
 
 from .snapshot import ChannelStatus, DeviceSnapshot, finite_or_none
@@ -65,6 +66,11 @@ class Frame:
     def of(cls, snap: DeviceSnapshot) -> Frame:
         """The frame of ``snap``, built anew (``frame_of`` builds it once and shares it)."""
         cop = snap.center_of_pressure_mm
+        n = len(snap.channel_names)
+        # one rounding pass over the three per-channel arrays: each numpy call of the pass
+        # costs about as much for 64 values as for 192
+        stacked = np.concatenate((snap.force_n, snap.force_static_n, snap.resistance_ohm), dtype=np.float64)
+        values = finite_or_none(stacked, DECIMALS)
         return cls(
             device=snap.device,
             up=bool(snap.up),
@@ -74,10 +80,10 @@ class Frame:
             last_success_time_s=finite_or_none(snap.last_success_timestamp_s, DECIMALS),
             poll_interval_s=_rounded(snap.poll_interval_s),
             channel_names=tuple(snap.channel_names),
-            force_n=tuple(finite_or_none(snap.force_n, DECIMALS)),
-            force_static_n=tuple(finite_or_none(snap.force_static_n, DECIMALS)),
-            resistance_ohm=tuple(finite_or_none(snap.resistance_ohm, DECIMALS)),
-            status=tuple(_STATUSES[s] for s in snap.status.tolist()),
+            force_n=tuple(values[:n]),
+            force_static_n=tuple(values[n : 2 * n]),
+            resistance_ohm=tuple(values[2 * n :]),
+            status=tuple(map(_STATUSES.__getitem__, snap.status.tolist())),
             total_force_n=_rounded(snap.total_force_n),
             center_of_pressure_mm=None if cop is None else (_rounded(cop[0]), _rounded(cop[1])),
             contact_area_mm2=_rounded(snap.contact_area_mm2),

@@ -203,15 +203,41 @@ class StaticEstimate:
     guess_n: FloatArray
 
     def evaluate(self) -> FloatArray:
-        out = np.full(len(self.resistance_ohm), np.nan)
-        guess = np.where(np.isfinite(self.guess_n), np.maximum(self.guess_n, 0.0), 0.0)
-        for idx, model in self.groups:
-            temp = None
-            if self.temperature_c is not None and model.has("temperature"):
-                temp = self.temperature_c[idx]
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                out[idx] = model.invert(self.resistance_ohm[idx], None, temp, guess_n=guess[idx]).force_n
+        """The static force of every channel (N; NaN where the status carries none)."""
+        n = len(self.resistance_ohm)
+        # the inversion clips a guess into the force range, where a NaN, negative or -inf
+        # guess starts at force_min as 0 N does; only +inf would start elsewhere (force_max)
+        guess = np.where(self.guess_n == np.inf, 0.0, self.guess_n)
+        out: FloatArray | None = None
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            if len(self.groups) == 1 and len(self.groups[0][0]) == n and _in_order(self.groups[0][0]):
+                model = self.groups[0][1]
+                temp = self.temperature_c if model.has("temperature") else None
+                # one model for every channel in order (the common case): no gathering
+                out = model.invert(self.resistance_ohm, None, temp, guess_n=guess).force_n
+            else:
+                out = np.full(n, np.nan)
+                for idx, model in self.groups:
+                    temp = None
+                    if self.temperature_c is not None and model.has("temperature"):
+                        temp = self.temperature_c[idx]
+                    out[idx] = model.invert(self.resistance_ohm[idx], None, temp, guess_n=guess[idx]).force_n
         return read_only(np.where(self.valued & np.isfinite(out), out, np.nan))
+
+
+def _in_order(idx: NDArray[np.intp]) -> bool:
+    """Whether ``idx`` is 0, 1, ..., len - 1 (remembered per index array: groups are fixed)."""
+    key = id(idx)
+    known = _IN_ORDER.get(key)
+    if known is None or known[0] is not idx:
+        known = (idx, bool(np.array_equal(idx, np.arange(len(idx)))))
+        if len(_IN_ORDER) > 256:
+            _IN_ORDER.clear()
+        _IN_ORDER[key] = known
+    return known[1]
+
+
+_IN_ORDER: dict[int, tuple[NDArray[np.intp], bool]] = {}
 
 
 @dataclass(frozen=True, eq=False)
