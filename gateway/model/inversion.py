@@ -72,6 +72,7 @@ class Inverter:
         # the parts of R(force_min) and R(force_max) that no state changes
         self._ends_strain = evaluator.elastic_strain(self._force_ends)
         self._ends_fixed_ohm = evaluator.fixed_ohm(self._force_ends)
+        self._static_ends: FloatArray | None = None
 
     def ends_ohm(self, state_strain: FloatArray, r0: FloatArray) -> FloatArray:
         """R(force_min) and R(force_max) per channel, shape (2, N)."""
@@ -97,7 +98,14 @@ class Inverter:
         lean = shape == p.r0_ohm.shape and strain.shape in ((), shape)
         if lean:  # one sample per channel (the polling path): no broadcasting copies
             fmin, fmax = p.force_min_n, p.force_max_n
-            ends = self.ends_ohm(strain, r0t)
+            if r0t is p.r0_ohm and strain.ndim == 0 and float(strain) == 0.0:
+                # no state, no temperature (a static inversion): the same ends every call
+                if self._static_ends is None:
+                    self._static_ends = self.ends_ohm(strain, r0t)
+                    self._static_ends.flags.writeable = False
+                ends = self._static_ends
+            else:
+                ends = self.ends_ohm(strain, r0t)
         else:
             shape = np.broadcast_shapes(r_meas.shape, p.r0_ohm.shape, strain.shape)
             r_meas = np.broadcast_to(r_meas, shape)

@@ -217,3 +217,27 @@ def test_the_polling_path_and_the_bulk_path_of_the_inversion_agree(
     np.testing.assert_allclose(lean.force_n[ok], forces[ok], rtol=1e-6)
     assert np.isnan(lean.force_n[lean.status == ForceStatus.INVALID]).all()
     assert np.isfinite(lean.force_n[lean.status != ForceStatus.INVALID]).all()
+
+
+def test_a_static_inversion_reads_alike_on_every_call_and_after_a_warm_one() -> None:
+    """The inverter keeps the force range's end resistances of a static inversion (no state,
+    no temperature): later calls, and calls after a warm or tracked one, read what a fresh
+    model reads."""
+    from gateway.model import SensorModel, SensorParams
+
+    def fresh() -> SensorModel:
+        return SensorModel("tunneling,contact,creep,temperature", [SensorParams()] * 3)
+
+    r = fresh().resistance(np.array([0.2, 3.0, 9.0]))
+    r_out = np.array([r[0], 1e12, 1e-3])  # in range, no contact (0 N), saturated (force_max)
+    model = fresh()
+    first = model.invert_static(r_out)
+    model.invert_static(r_out, temperature_c=np.array([60.0, 60.0, 60.0]))
+    model.invert(r_out, model.settled_state(np.array([1.0, 1.0, 1.0])))
+    again = model.invert_static(r_out)
+    want = fresh().invert_static(r_out)
+    for got in (first, again):
+        np.testing.assert_array_equal(got.force_n, want.force_n)
+        np.testing.assert_array_equal(got.status, want.status)
+    assert want.force_n[1] == 0.0 and want.force_n[2] == 10.0
+    np.testing.assert_allclose(want.force_n[0], 0.2, rtol=1e-8)
