@@ -29,7 +29,7 @@ from tomlkit.items import KeyType, SingleKey, Table
 from ..errors import ConfigError
 from ..model.conversion import CONVERSION_KINDS
 from ..model.effects import EFFECT_NAMES, UnknownEffectError, parse_effects
-from .tables import Context, join_key, parse_toml, read_text_file, show_value, suggest, type_name
+from .tables import Context, join_key, parse_toml, read_text_file, show_path, show_value, suggest, type_name
 
 __all__ = [
     "CALIBRATED_RANGE_KEYS",
@@ -352,7 +352,7 @@ def read_calibration(
         )
     ctx, key = named_at
     if not path.exists():
-        raise ctx.error(key, f"{path} does not exist (calibration file)")
+        raise ctx.error(key, f"{show_path(path)} does not exist (calibration file)")
     try:
         text = read_text_file(path, "calibration file")
     except ConfigError as exc:

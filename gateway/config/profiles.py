@@ -17,7 +17,7 @@ from typing import Any, Final
 
 from ..errors import ConfigError
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS
-from .tables import Context, Table, parse_toml, read_text_file, suggest
+from .tables import Context, Table, parse_toml, read_text_file, show_path, suggest
 from .wire import CHECK_KEYS, FRAME_KEYS, REGISTER_KEYS
 
 __all__ = ["MERGED_TABLES", "PROFILE_KEYS", "builtin_profiles", "load_profile", "merge_profile"]
@@ -98,7 +98,7 @@ def load_profile(ctx: Context, key_path: str, reference: str) -> tuple[str, dict
     else:
         file = ctx.resolve(reference)
         if not file.exists():
-            raise ctx.error(key_path, f"{file} does not exist (device profile)")
+            raise ctx.error(key_path, f"{show_path(file)} does not exist (device profile)")
         try:  # a regular file of bounded size: /dev/zero is refused unread
             text = read_text_file(file, "device profile")
         except ConfigError as exc:

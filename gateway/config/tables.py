@@ -270,26 +270,35 @@ def parse_toml(ctx: Context, text: str, what: str) -> dict[str, Any]:
         raise ctx.error("", f"invalid TOML{where}: a number too long to read ({reason})") from None
 
 
+def show_path(file: Path) -> str:
+    """A path as a message prints it: as it is, or quoted with its control characters escaped
+    (JSON) when it holds any, so that a message naming it stays one line."""
+    text = str(file)
+    return text if text.isprintable() else json.dumps(text, ensure_ascii=False)
+
+
 def check_private(ctx: Context, path: str, file: Path, what: str) -> None:
     """Refuse a secret-holding file that users other than its owner can access."""
+    shown = show_path(file)
     try:
         mode = stat.S_IMODE(file.stat().st_mode)
     except FileNotFoundError:
-        raise ctx.error(path, f"{file} does not exist ({what})") from None
+        raise ctx.error(path, f"{shown} does not exist ({what})") from None
     except OSError as exc:
-        raise ctx.error(path, f"cannot access {file}: {exc.strerror or exc}") from None
+        raise ctx.error(path, f"cannot access {shown}: {exc.strerror or exc}") from None
     if not file.is_file():
-        raise ctx.error(path, f"{file} is not a regular file ({what})")
+        raise ctx.error(path, f"{shown} is not a regular file ({what})")
     if mode & 0o077:
         raise ctx.error(
             path,
-            f"{file} holds secrets ({what}) but is accessible to other users (mode {mode:04o}; allowed: "
-            f"no group/other permissions, e.g. 0600): run `chmod 600 {file}`",
+            f"{shown} holds secrets ({what}) but is accessible to other users (mode {mode:04o}; allowed: "
+            f"no group/other permissions, e.g. 0600): run `chmod 600 {shown}`",
         )
 
 
 def check_exists(ctx: Context, path: str, file: Path, what: str) -> None:
+    shown = show_path(file)
     if not file.exists():
-        raise ctx.error(path, f"{file} does not exist ({what})")
+        raise ctx.error(path, f"{shown} does not exist ({what})")
     if not file.is_file():
-        raise ctx.error(path, f"{file} is not a regular file ({what})")
+        raise ctx.error(path, f"{shown} is not a regular file ({what})")

@@ -322,3 +322,23 @@ def test_the_page_can_be_turned_off_in_the_metrics_section() -> None:
         ConfigError, match=r"metrics\.page: expected a boolean \(true or false\), got string 'no'"
     ):
         parse(replaced('address = "127.0.0.1:9830"', 'address = "127.0.0.1:9830"\npage = "no"'))
+
+
+@pytest.mark.parametrize("key", ["web_config", "calibration", "profile"])
+def test_a_path_with_a_newline_is_named_on_one_line(tmp_path: Path, key: str) -> None:
+    # found by tests/fuzz/test_fuzz_config_parser.py: web_config = "0\n" printed the path raw,
+    # a message of two lines
+    if key == "web_config":
+        text = BASE.replace('9830"\n', '9830"\nweb_config = "0\\n"\n')
+    elif key == "profile":
+        text = BASE.replace('profile = "tactile-sim"', 'profile = "0\\nx.toml"')
+    else:
+        text = BASE + 'calibration = "0\\nx"\n'
+    assert text != BASE
+    config = tmp_path / "gateway.toml"
+    config.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        load_config(config)
+    message = str(info.value)
+    assert "\n" not in message and "does not exist" in message, message
+    assert "\\n" in message  # the newline shown escaped
