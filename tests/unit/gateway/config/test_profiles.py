@@ -60,7 +60,8 @@ def values(items: Sequence[object]) -> str:
 def test_the_shipped_profiles_are_listed_with_their_descriptions() -> None:
     shipped = builtin_profiles()
     assert list(shipped) == [
-        "acme-at6x6", "dexhand-1062", "dfrobot-6x6", "generic-adc", "skin60-counts", "skin60-mn", "tactile-sim"
+        "acme-at6x6", "dexhand-1062", "dfrobot-6x6", "generic-adc", "skin60-counts", "skin60-mn",
+        "tactile-sim",
     ]  # fmt: skip
     assert shipped["acme-at6x6"] == "Acme Tactile AT-6x6, 36 cells, 12-bit low-side divider"
     assert shipped["tactile-sim"] == "tactile-gateway simulated array (docs/register-map.md)"
@@ -198,7 +199,8 @@ def test_an_unknown_profile_lists_the_shipped_ones_with_a_suggestion() -> None:
     message = refusal('profile = "acme-at6"\n')
     assert message == (
         f"{SOURCE}: {DEV}.profile: no profile 'acme-at6'; did you mean 'acme-at6x6'? "
-        "(shipped profiles: acme-at6x6, dexhand-1062, dfrobot-6x6, generic-adc, skin60-counts, skin60-mn, tactile-sim; "
+        "(shipped profiles: acme-at6x6, dexhand-1062, dfrobot-6x6, generic-adc, skin60-counts, skin60-mn, "
+        "tactile-sim; "
         "or the path of a profile file ending in .toml)"
     )
     message = refusal('profile = "zzzz"\n')
