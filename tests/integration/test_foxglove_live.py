@@ -11,7 +11,6 @@ import json
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 from types import ModuleType
 
@@ -19,6 +18,7 @@ import aiohttp
 import numpy as np
 import pytest
 from netutil import free_port
+from waiting import until
 
 pytestmark = [pytest.mark.slow]
 
@@ -39,15 +39,16 @@ async def _connect(
     session: aiohttp.ClientSession, ws_client: ModuleType, port: int, gateway: subprocess.Popen[bytes]
 ) -> aiohttp.ClientWebSocketResponse:
     """The gateway's Foxglove server, once it listens (the gateway may still be starting)."""
-    deadline = time.monotonic() + 30.0
-    while True:
-        try:
-            ws: aiohttp.ClientWebSocketResponse = await ws_client.connect(session, port)
-            return ws
-        except aiohttp.ClientConnectionError:
-            if gateway.poll() is not None or time.monotonic() > deadline:
-                raise
-            await asyncio.sleep(0.05)
+
+    async def connect() -> aiohttp.ClientWebSocketResponse:
+        assert gateway.poll() is None, "the gateway exited"
+        ws: aiohttp.ClientWebSocketResponse = await ws_client.connect(session, port)
+        return ws
+
+    ws: aiohttp.ClientWebSocketResponse = await until(
+        connect, 30.0, "the gateway's Foxglove server", ignore=(aiohttp.ClientConnectionError,)
+    )
+    return ws
 
 
 async def _receive(

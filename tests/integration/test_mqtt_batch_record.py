@@ -9,8 +9,7 @@ import asyncio
 import json
 import math
 import sys
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +17,7 @@ import numpy as np
 import pytest
 from broker import Broker
 from netutil import free_port
+from waiting import until
 
 from gateway.analysis.records import read_record
 from gateway.config import load_config
@@ -55,15 +55,6 @@ def _config(tmp_path: Path, sim_port: int, broker_port: int, encoding: str) -> P
         '[[bus.device]]\nname = "arr"\ndevice_id = 1\nprofile = "tactile-sim"\nchannels = 4\ncolumns = 2\n'
     )
     return path
-
-
-async def until(cond: Callable[[], bool], timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            return False
-        await asyncio.sleep(0.02)
-    return True
 
 
 class Exported:
@@ -124,7 +115,9 @@ async def test_batched_frames_reach_the_record_each_with_its_sequence(
         try:
             async with Poller(config, holder):
                 # the retained meta message is on the broker before the subscriber comes
-                assert await until(lambda: publisher.stats().published.get("arr", 0) >= 5, 20.0)
+                await until(
+                    lambda: publisher.stats().published.get("arr", 0) >= 5, 20.0, "5 frames published"
+                )
                 cmd = [
                     str(BIN / "tactile-gateway"), "subscribe", "--broker", f"127.0.0.1:{broker.port}",
                     "--prefix", "lab/tactile", "--gateway", "gw1", "--device", "arr",

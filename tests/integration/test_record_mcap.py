@@ -7,13 +7,12 @@ from __future__ import annotations
 import asyncio
 import io
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from waiting import until
 
 from gateway.analysis.recorder import LiveRecorder
 from gateway.analysis.records import read_record
@@ -36,15 +35,6 @@ def _config(tmp_path: Path, port: int) -> Path:
     return path
 
 
-async def until(cond: Callable[[], bool], timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            return False
-        await asyncio.sleep(0.02)
-    return True
-
-
 async def test_csv_and_mcap_records_of_the_same_polls_read_back_row_for_row(tmp_path: Path) -> None:
     array = SimArray(ArrayConfig(channels=8, columns=4, scenario="indentation", speed=20.0, seed=5))
     csv_path, mcap_path = tmp_path / "same.csv", tmp_path / "same.mcap"
@@ -58,7 +48,7 @@ async def test_csv_and_mcap_records_of_the_same_polls_read_back_row_for_row(tmp_
             holder.subscribe(as_csv)
             holder.subscribe(as_mcap)
             async with Poller(config, holder):
-                assert await until(lambda: as_mcap.stats.polls >= POLLS, 60.0), "the gateway polls the array"
+                await until(lambda: as_mcap.stats.polls >= POLLS, 60.0, "the gateway polls the array")
             for recorder, out in ((as_csv, csv_out), (as_mcap, mcap_out)):
                 recorder.close()
                 out.commit()
