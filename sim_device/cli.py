@@ -242,6 +242,13 @@ def fsr_record_cmd(
     help="hand only: the raw value of a saturated taxel.",
 )
 @click.option(
+    "--rest-offset-lsb",
+    type=click.FloatRange(0.0, 10000.0),
+    default=0.0,
+    show_default=True,
+    help="hand only: each taxel's own reading at rest, uniform in 0..2x this (a preloaded skin).",
+)
+@click.option(
     "--joint-error",
     "joint_errors",
     multiple=True,
@@ -302,6 +309,7 @@ def run_cmd(
     stuck: str,
     saturation_code: int,
     joint_errors: tuple[str, ...],
+    rest_offset_lsb: float,
 ) -> None:
     """Serve simulated arrays until SIGINT/SIGTERM (or --stop-after)."""
     transport = _transport(tcp, rtu, rtu_tcp, tls)
@@ -313,11 +321,13 @@ def run_cmd(
         raise click.BadParameter("must be > 0", param_hint="--record-period")
     ids = _device_ids(device_ids)
     cols = columns if columns is not None else min(channels, math.ceil(math.sqrt(channels)))
-    hand_options = hand_layout != "byte" or base_offset or dead or frozen or stuck or joint_errors
+    hand_options = (
+        hand_layout != "byte" or base_offset or dead or frozen or stuck or joint_errors or rest_offset_lsb
+    )
     if register_map != "hand" and (hand_options or saturation_code != 0xFFFF):
         raise click.UsageError(
-            "--layout, --base-offset, --dead, --frozen, --stuck, --saturation-code and --joint-error "
-            "are only used with --map hand"
+            "--layout, --base-offset, --dead, --frozen, --stuck, --saturation-code, --rest-offset-lsb and "
+            "--joint-error are only used with --map hand"
         )
     if register_map == "hand":
         if transport.kind == "tls":
@@ -340,6 +350,7 @@ def run_cmd(
                 speed=speed,
                 noise_lsb=noise_lsb,
                 device_id=ids[0],
+                rest_offset_lsb=rest_offset_lsb,
                 world_effects=parse_world_effects(world_effects),
                 param_spread=not no_spread,
                 sensor_noise_rel=sensor_noise,

@@ -5,8 +5,10 @@ Physics: each region is a ``SimArray`` of the paper's sensor (creep, part-to-par
 the world effects), converted at 30 Hz (``FRAME_PERIOD_S``): the registers change once a
 frame, whatever the reads. Read-out: each taxel is driven at a fixed voltage and its current
 measured by a transimpedance stage into a 16-bit converter, so the raw value is proportional
-to the taxel's conductance: ``raw = round(65535 R_f / r + noise)`` with ``R_f =
-FEEDBACK_OHM`` (1 kohm), 0 unloaded (r is infinite), rising with pressure. Values from 0xFF00
+to the taxel's conductance: ``raw = round(65535 R_f / r + offset + noise)`` with ``R_f =
+FEEDBACK_OHM`` (1 kohm), about 0 unloaded (r is infinite), rising with pressure. ``offset``
+is each taxel's own reading at rest (``rest_offset_lsb``: uniform in 0..2x it, default 0): a
+preloaded skin or a leaking board, which a real hand has and a zero must take off. Values from 0xFF00
 up are the hand's codes, never pressures: a taxel whose conversion reaches 0xFF00 (r below
 about 1.004 kohm, some 24 N on a nominal taxel) reads the saturation code (0xFFFF by default).
 
@@ -38,6 +40,8 @@ from .hand_scenarios import HandScenario, TaxelSpec, load_hand_scenario
 FRAME_RATE_HZ = 30.0
 FRAME_PERIOD_S = 1.0 / FRAME_RATE_HZ
 FEEDBACK_OHM = 1000.0
+#: The largest mean offset at rest a taxel may be given (LSB).
+MAX_REST_OFFSET_LSB = 10000.0
 FULL_SCALE = 0xFFFF
 ANGLE_RATE_PER_S = 1000.0
 #: Bound on the joint steps of one catch-up (a long idle is crossed in coarser steps).
@@ -77,6 +81,7 @@ class HandDevice:
         seed: int = 1,
         speed: float = 1.0,
         noise_lsb: float = 2.0,
+        rest_offset_lsb: float = 0.0,
         saturation_code: int = hm.SATURATION_CODE,
         dead: Iterable[TaxelSpec] = (),
         frozen: Iterable[TaxelSpec] = (),
@@ -89,6 +94,10 @@ class HandDevice:
             raise ValueError(f"saturation code {saturation_code} must be within 0xFF00..0xFFFF")
         if not (math.isfinite(noise_lsb) and noise_lsb >= 0.0):
             raise ValueError(f"noise_lsb = {noise_lsb!r} must be >= 0")
+        if not (math.isfinite(rest_offset_lsb) and 0.0 <= rest_offset_lsb <= MAX_REST_OFFSET_LSB):
+            raise ValueError(
+                f"rest_offset_lsb = {rest_offset_lsb!r} must be within 0..{MAX_REST_OFFSET_LSB:g} LSB"
+            )
         self.scenario = scenario if isinstance(scenario, HandScenario) else load_hand_scenario(scenario)
         self.layout = layout or hm.Layout()
         self.device_id = device_id
@@ -111,6 +120,11 @@ class HandDevice:
             )
             self.arrays[r.name] = SimArray(config, device_id, clock=self._clock)
         self._rng = np.random.default_rng([seed, device_id, 34])
+        # each taxel's own reading at rest (the skin's preload, the board's leak), fixed for
+        # the hand's life: uniform in 0..2 rest_offset_lsb, from its own stream
+        offsets = np.random.default_rng([seed, device_id, 35])
+        self.rest_offset_lsb = float(rest_offset_lsb)
+        self._offsets = {r.name: offsets.uniform(0.0, 2.0 * self.rest_offset_lsb, r.size) for r in hm.REGIONS}
         self._dead = self._masks([*self.scenario.dead, *dead])
         self._stuck = self._masks([*self.scenario.stuck, *stuck])
         self._frozen_specs = [*self.scenario.frozen, *frozen]
@@ -157,6 +171,7 @@ class HandDevice:
             array.advance(until)
             latest = array.latest()
             noise = self.noise_lsb * self._rng.standard_normal(r.size) if self.noise_lsb > 0 else 0.0
+            noise = noise + self._offsets[r.name]
             raw = raw_from_resistance(latest.true_resistance_ohm[0], noise, self.saturation_code)
             frozen = self._frozen[r.name]
             if frozen.any():

@@ -24,6 +24,7 @@ def make_hand(
     speed: float,
     noise_lsb: float,
     device_id: int,
+    rest_offset_lsb: float = 0.0,
     **array_options: Any,
 ) -> HandDevice:
     """The hand the options describe; ``ValueError`` (or ``ScenarioError``) with a precise message."""
@@ -33,6 +34,7 @@ def make_hand(
         seed=seed,
         speed=speed,
         noise_lsb=noise_lsb,
+        rest_offset_lsb=rest_offset_lsb,
         saturation_code=saturation_code,
         dead=parse_taxel_specs(dead, "--dead"),
         frozen=parse_taxel_specs(frozen, "--frozen", allow_value=True),

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from ..config import DeviceConfig, Encoding
 from ..errors import GatewayError
-from ..model import DividerStatus, SensorModel
+from ..model import DividerStatus, RatioFrontEnd, SensorModel
 
 __all__ = [
     "MIN_POLLS",
@@ -177,6 +177,86 @@ def samples_to_series(
     return [ChannelSeries(i, data[:, i], t) for i in chosen]
 
 
+def rest_readings(
+    device: DeviceConfig, mean: FloatArray, counts: bool
+) -> tuple[FloatArray, NDArray[Any], FloatArray]:
+    """Each channel's resistance (ohm; r / R_ref for a ``ratio`` front end), ``DividerStatus``
+    and baseline value (rounded counts when ``counts``, else ohm) at rest, from its mean
+    reading there. With ``rails = "readings"`` the open rail is no current at rest (OK, +inf),
+    as the gateway reads it."""
+    if counts:
+        r, status = device.front_end.resistance(mean)
+        value = np.rint(mean)
+        _, rounded_status = device.front_end.resistance(value)
+        status = np.where(rounded_status == int(DividerStatus.OK), status, rounded_status)
+        if device.rails == "readings":
+            status = np.where(status == int(DividerStatus.OPEN), int(DividerStatus.OK), status)
+        return r, status, value
+    r = mean.copy()
+    ok = np.isfinite(r) & (r > 0)
+    if device.rails == "readings":
+        ok |= np.isposinf(r)
+    return r, np.where(ok, int(DividerStatus.OK), int(DividerStatus.INVALID)), r
+
+
+def rest_forces(
+    device: DeviceConfig, chosen: Sequence[int], r: FloatArray, ok: NDArray[np.bool_]
+) -> FloatArray:
+    """The force (N) each channel's model reads at ``r`` (NaN where not ``ok``, and for a
+    channel with nothing to read a force with: ``DeviceConfig.needs_calibration``)."""
+    force = np.full(len(chosen), np.nan)
+    for k, i in enumerate(chosen):
+        ch = device.channels[i]
+        if ok[k] and not device.needs_calibration(ch):
+            model = SensorModel(ch.effects, [ch.params])
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                force[k] = float(model.invert_static(np.array([r[k]])).force_n[0])
+    return force
+
+
+def conductance_floor(device: DeviceConfig, counts: bool, max_noise_counts: float) -> float:
+    """Read in counts, the conductance of a code ``max_noise_counts`` beyond the open sensor's
+    (0 in ohm): less than that at rest is noise, not load."""
+    if not counts:
+        return 0.0
+    x_open, x_short = device.front_end._code_edges()
+    step = max_noise_counts if x_short >= x_open else -max_noise_counts
+    code = min(max(x_open + step, 0.0), float(device.front_end.full_scale))
+    r_floor, _ = device.front_end.resistance(np.array([code]))
+    return 1.0 / float(r_floor[0]) if np.isfinite(r_floor[0]) and r_floor[0] > 0 else 0.0
+
+
+def rest_conductance(r: FloatArray, ok: NDArray[np.bool_]) -> FloatArray:
+    """1 / r where ``ok`` (0 for +inf: no current), NaN elsewhere."""
+    with np.errstate(divide="ignore"):
+        return np.where(ok, 1.0 / np.where(ok, r, 1.0), np.nan)
+
+
+def conductance_ratio(
+    device: DeviceConfig, r: FloatArray, ok: NDArray[np.bool_], counts: bool, max_noise_counts: float
+) -> FloatArray:
+    """Each channel's conductance at rest over the median channel's (NaN for all with fewer than
+    4 ``ok`` channels). Read in counts, the median is taken as at least ``conductance_floor``:
+    on a read-out whose unloaded taxels read about 0 (a robot hand's raw values) the median is
+    noise, and noise is no load."""
+    ratio = np.full(r.size, np.nan)
+    if np.count_nonzero(ok) < 4:
+        return ratio
+    conductance = rest_conductance(r, ok)
+    median = max(float(np.nanmedian(conductance)), conductance_floor(device, counts, max_noise_counts))
+    if median > 0:
+        ratio = conductance / median
+    return ratio
+
+
+def load_detail(force_n: float, r: float, ratio: float, relative: bool) -> str:
+    """``1.2 N by the model at 9e+04 ohm, 4x the median conductance``; without a force (an
+    uncalibrated channel) the reading alone."""
+    unit = "R_ref" if relative else "ohm"
+    head = f"{r:.4g} {unit}" if math.isnan(force_n) else f"{force_n:.3g} N by the model at {r:.4g} {unit}"
+    return f"{head}, {ratio:.2g}x the median conductance"
+
+
 def _loaded_message(
     device: DeviceConfig,
     idx: NDArray[np.intp],
@@ -187,10 +267,8 @@ def _loaded_message(
     chosen: Sequence[int],
     window: str,
 ) -> str:
-    detail = [
-        f"{force[i]:.3g} N by the model at {r[i]:.4g} ohm, {ratio[i]:.2g}x the median conductance"
-        for i in idx
-    ]
+    relative = isinstance(device.front_end, RatioFrontEnd)
+    detail = [load_detail(float(force[i]), float(r[i]), float(ratio[i]), relative) for i in idx]
     loaded_channels = {chosen[int(i)] for i in idx}
     rest = [c for c in chosen if c not in loaded_channels]
     way = f"--channels {index_ranges(rest)}" if rest else "--channels with the unloaded ones"
@@ -273,15 +351,7 @@ def compute_tare_series(
     finite = np.isfinite(mean)
 
     # FAULTY: a short or an invalid reading at rest
-    if counts:
-        r, status = device.front_end.resistance(mean)
-        value = np.rint(mean)
-        _, rounded_status = device.front_end.resistance(value)
-        status = np.where(rounded_status == int(DividerStatus.OK), status, rounded_status)
-    else:
-        r = mean.copy()
-        status = np.where(np.isfinite(r) & (r > 0), int(DividerStatus.OK), int(DividerStatus.INVALID))
-        value = r
+    r, status, value = rest_readings(device, mean, counts)
     ok = status == int(DividerStatus.OK)
     labels = {int(s): s.name.lower() for s in DividerStatus}
     faulty = np.flatnonzero(np.isin(status, [int(DividerStatus.SHORT), int(DividerStatus.INVALID)]))
@@ -301,21 +371,10 @@ def compute_tare_series(
         )
 
     # LOADED: a force by the model, or far more conductance than the median channel
-    force = np.full(m, np.nan)
-    for k, i in enumerate(chosen):
-        if ok[k]:
-            ch = device.channels[i]
-            model = SensorModel(ch.effects, [ch.params])
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                force[k] = float(model.invert_static(np.array([r[k]])).force_n[0])
-    loaded = ok & (force > max_force_n)
-    conductance = np.where(ok, 1.0 / np.where(ok, r, 1.0), np.nan)
-    ratio = np.full(m, np.nan)
-    if np.count_nonzero(ok) >= 4:
-        median = float(np.nanmedian(conductance))
-        if median > 0:
-            ratio = conductance / median
-            loaded |= ok & (ratio > LOADED_FACTOR)
+    force = rest_forces(device, chosen, r, ok)
+    ratio = conductance_ratio(device, r, ok, counts, max_noise_counts)
+    with np.errstate(invalid="ignore"):
+        loaded = ok & ((force > max_force_n) | (ratio > LOADED_FACTOR))
     if loaded.any():
         raise TareError(
             _loaded_message(device, np.flatnonzero(loaded), force, r, ratio, max_force_n, chosen, window)

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import DeviceConfig
-from ..model import DividerStatus, SensorModel
+from ..model import DividerStatus, RatioFrontEnd
 from .tare import (
     DRIFT_FLOOR_COUNTS,
     DRIFT_FLOOR_REL,
@@ -57,6 +57,12 @@ from .tare import (
     FloatArray,
     TareError,
     TareResult,
+    conductance_floor,
+    conductance_ratio,
+    load_detail,
+    rest_conductance,
+    rest_forces,
+    rest_readings,
     thirds_drift,
 )
 
@@ -66,6 +72,8 @@ __all__ = ["RestSearch", "RestStretch", "WindowTare", "compute_window_tare", "re
 PLATEAU_SIGMAS = 4.0
 #: a median absolute deviation times this is a standard deviation (normal noise)
 _MAD_TO_STD = 1.4826
+#: a region of fewer chosen taxels is not judged as a whole (``loaded_regions``)
+REGION_MIN_TAXELS = 9
 #: a gap of at most this many polls within two bands of the extreme does not end a plateau
 BRIDGE_POLLS = 5
 
@@ -263,35 +271,22 @@ def compute_window_tare(
     found = [
         rest_stretch(s.values, unloaded_high=high, floor_abs=floor_abs, floor_rel=floor_rel) for s in series
     ]
-    m = len(series)
     # each channel at its least loaded: its still stretch, else the extreme itself (its level,
     # a median, over the polls of ``top``)
     rep = [f.stretch or f.top for f in found]
     mean = np.array([f.level if f.stretch is None else f.stretch.mean for f in found])
     labels = {int(st): st.name.lower() for st in DividerStatus}
-    if counts:
-        r, status = device.front_end.resistance(mean)
-        value = np.rint(mean)
-        _, rounded_status = device.front_end.resistance(value)
-        status = np.where(rounded_status == int(DividerStatus.OK), status, rounded_status)
-    else:
-        r = mean.copy()
-        status = np.where(np.isfinite(r) & (r > 0), int(DividerStatus.OK), int(DividerStatus.INVALID))
-        value = r
+    r, status, value = rest_readings(device, mean, counts)
     ok = status == int(DividerStatus.OK)
-    force = np.full(m, np.nan)
-    for k, s in enumerate(series):
-        if ok[k]:
-            ch = device.channels[s.index]
-            model = SensorModel(ch.effects, [ch.params])
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-                force[k] = float(model.invert_static(np.array([r[k]])).force_n[0])
-    ratio = np.full(m, np.nan)
-    if np.count_nonzero(ok) >= 4:
-        conductance = np.where(ok, 1.0 / np.where(ok, r, 1.0), np.nan)
-        median = float(np.nanmedian(conductance))
-        if median > 0:
-            ratio = conductance / median
+    force = rest_forces(device, [s.index for s in series], r, ok)
+    ratio = conductance_ratio(device, r, ok, counts, max_noise_counts)
+    relative = isinstance(device.front_end, RatioFrontEnd)
+    by_region = loaded_regions(
+        device,
+        [s.index for s in series],
+        rest_conductance(r, ok),
+        conductance_floor(device, counts, max_noise_counts),
+    )
     timed = all(s.time_s is not None for s in series)
     skipped: list[tuple[int, str]] = []
     zeroed: list[int] = []
@@ -301,12 +296,24 @@ def compute_window_tare(
             skipped.append((s.index, f"{f.why} in {window}"))
         elif status[k] in (int(DividerStatus.SHORT), int(DividerStatus.INVALID)):
             skipped.append((s.index, f"faulty at its least loaded {where}: {labels[int(status[k])]}"))
-        elif ok[k] and (force[k] > max_force_n or ratio[k] > LOADED_FACTOR):
+        elif k in by_region.loaded:
+            skipped.append((s.index, f"loaded throughout {window} with its region: {by_region.loaded[k]}"))
+        elif k in by_region.ratio and ok[k] and by_region.ratio[k] > LOADED_FACTOR:
+            detail = load_detail(float(force[k]), float(r[k]), by_region.ratio[k], relative)
             skipped.append(
                 (
                     s.index,
-                    f"loaded throughout {window}: at its least loaded {where} {force[k]:.3g} N by the "
-                    f"model at {r[k]:.4g} ohm, {ratio[k]:.2g}x the median conductance; allowed at rest: "
+                    f"loaded throughout {window}: at its least loaded {where} {detail} of its region "
+                    f"(or the array's, whichever is more); allowed at rest: {LOADED_FACTOR:g}x; sample "
+                    "longer, or lift the load off it for a moment",
+                )
+            )
+        elif k not in by_region.ratio and ok[k] and (force[k] > max_force_n or ratio[k] > LOADED_FACTOR):
+            detail = load_detail(float(force[k]), float(r[k]), float(ratio[k]), relative)
+            skipped.append(
+                (
+                    s.index,
+                    f"loaded throughout {window}: at its least loaded {where} {detail}; allowed at rest: "
                     f"at most {max_force_n:g} N (--max-force) and {LOADED_FACTOR:g}x the median; "
                     "sample longer, or lift the load off it for a moment",
                 )
@@ -341,6 +348,61 @@ def compute_window_tare(
     spans = tuple(_span(series[k], p) for k, p in zip(zeroed, stretches, strict=True) if p is not None)
     polls = tuple(p.n_polls for p in stretches if p is not None)
     return WindowTare(result, spans, timed, tuple(skipped), polls)
+
+
+@dataclass(frozen=True)
+class RegionJudgement:
+    """Channels judged by their region (positions in the chosen channels): ``loaded`` those of a
+    region loaded as a whole, with why; ``ratio`` every other one's conductance at rest over
+    its region's median (at least noise's)."""
+
+    loaded: dict[int, str]
+    ratio: dict[int, float]
+
+
+def loaded_regions(
+    device: DeviceConfig, chosen: Sequence[int], conductance: FloatArray, floor_s: float
+) -> RegionJudgement:
+    """Each region of ``device`` judged as a whole at its channels' least loaded levels.
+
+    A taxel loaded throughout the window cannot be told from one whose own reading at rest is
+    high (a preloaded skin, a leak) by its own readings alone, nor by the model's force there;
+    a region can. Each taxel's offset is its own, so a region at rest has taxels of small
+    offset too: the least loaded tenth of its taxels (the 10th percentile of their
+    conductance at their least loaded) is near the array's. A region under a load throughout
+    (a palm held on an object) has none: its least loaded tenth conducts more than
+    ``LOADED_FACTOR`` times the array's (all chosen channels; at least the conductance of
+    noise, ``floor_s``), and none of its taxels is zeroed from this window. In a region at
+    rest a taxel is loaded when it conducts more than ``LOADED_FACTOR`` times the region's
+    median or the array's, whichever is more (a point load; a small region's median is
+    noisy), not by the model's force there (an offset is no force). Regions of
+    fewer than ``REGION_MIN_TAXELS`` chosen taxels are not judged."""
+    judged = RegionJudgement({}, {})
+    finite = np.isfinite(conductance)
+    if not device.regions or np.count_nonzero(finite) < REGION_MIN_TAXELS:
+        return judged
+    hand = max(float(np.percentile(conductance[finite], 10.0)), floor_s)
+    if not hand > 0.0:
+        return judged
+    typical = max(float(np.median(conductance[finite])), floor_s)
+    positions = np.asarray(chosen, dtype=np.intp)
+    for region in device.regions:
+        first, stop = region.first_channel, region.first_channel + region.n_channels
+        inside = np.flatnonzero((positions >= first) & (positions < stop) & finite)
+        if inside.size < REGION_MIN_TAXELS:
+            continue
+        low = float(np.percentile(conductance[inside], 10.0))
+        if low > LOADED_FACTOR * hand:
+            why = (
+                f"region {region.name}'s least loaded tenth conducts {low / hand:.2g}x the array's "
+                f"(allowed: {LOADED_FACTOR:g}x); a region at rest has taxels near the array's least; "
+                f"zero it when it is free (--channels {region.name})"
+            )
+            judged.loaded.update((int(k), why) for k in inside)
+            continue
+        median = max(float(np.median(conductance[inside])), typical)
+        judged.ratio.update((int(k), float(conductance[k]) / median) for k in inside)
+    return judged
 
 
 def _moving_text(s: ChannelSeries, moving: RestStretch | None, counts: bool, timed: bool) -> str:

@@ -180,6 +180,23 @@ def _region_lines(dev: DeviceConfig, requests: int) -> list[str]:
     return out
 
 
+def _readout_lines(dev: DeviceConfig) -> list[str]:
+    """What the rails mean, and the status words read with every poll."""
+    out = []
+    if dev.rails == "readings":
+        out.append(
+            "    rails: readings (the open rail is no current at rest: no contact, 0 N; the short rail "
+            "reads saturated)"
+        )
+    for word in dev.status_words:
+        parts = [f"{len(word.bits)} bits"] if word.bits else []
+        parts += [f"{len(word.errors)} error bits"] if word.errors else []
+        parts += [f"{len(word.codes)} codes"] if word.codes else []
+        meaning = ", ".join(parts) if parts else "its value"
+        out.append(f"    status word {word.name}: {word.table} {word.address} ({meaning})")
+    return out
+
+
 # ----------------------------------------------------------------------------------------------
 # check-config
 
@@ -287,7 +304,7 @@ def check_config(config_path: Path) -> None:
                     f"    {req.kind} {req.address}..{req.end} ({_plural(req.count, 'register')}): "
                     f"{', '.join(req.purpose)}"
                 )
-            for line in [*_region_lines(dev, len(plan)), *_device_lines(dev)]:
+            for line in [*_region_lines(dev, len(plan)), *_readout_lines(dev), *_device_lines(dev)]:
                 click.echo(line)
             if dev.calibration is not None:
                 for line in _override_lines(_overrides(text, config_path, b, d)):

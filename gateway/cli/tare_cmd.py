@@ -40,10 +40,20 @@ def _fail(message: str, code: int = 2) -> NoReturn:
 
 def parse_channels(spec: str, device: DeviceConfig) -> list[int]:
     """``ch00,ch05,0-11`` -> channel indices (ascending): names, indices 0..N-1 and ranges
-    ``A-B`` of indices; ``ValueError`` naming the entry that is none of them."""
+    ``A-B`` of indices, and on a device made of regions a region's name (``palm``) or a group's
+    (``index``: each of its regions); ``ValueError`` naming the entry that is none of them."""
     names = {ch.name: ch.index for ch in device.channels}
+    spans: dict[str, list[int]] = {}
+    for region in device.regions:
+        taxels = range(region.first_channel, region.first_channel + region.n_channels)
+        spans.setdefault(region.name, []).extend(taxels)
+        if region.group and region.group != region.name:
+            spans.setdefault(region.group, []).extend(taxels)
     last = device.n_channels - 1
-    allowed = f"allowed: channel names (e.g. {device.channels[0].name}), indices 0-{last} or ranges A-B"
+    regions = " or region and group names (e.g. palm)" if device.regions else ""
+    allowed = (
+        f"allowed: channel names (e.g. {device.channels[0].name}), indices 0-{last} or ranges A-B{regions}"
+    )
     out: set[int] = set()
     for raw in spec.split(","):
         entry = raw.strip()
@@ -51,6 +61,9 @@ def parse_channels(spec: str, device: DeviceConfig) -> list[int]:
             raise ValueError(f"--channels {spec!r}: an empty entry; {allowed}")
         if entry in names:
             out.add(names[entry])
+            continue
+        if entry in spans:
+            out.update(spans[entry])
             continue
         low, dash, high = entry.partition("-")
         try:
@@ -203,8 +216,9 @@ def window_lines(device: DeviceConfig, moving: WindowTare, key: str) -> list[str
 )  # fmt: skip
 @click.option(
     "--channels", "channels_spec", default=None, metavar="LIST",
-    help="Tare only these channels (names, indices 0..N-1 or ranges A-B, comma separated); the "
-    "others keep the baselines the file gives them.",
+    help="Tare only these channels (names, indices 0..N-1 or ranges A-B, and the regions and "
+    "groups of a device made of regions, e.g. palm or index; comma separated); the others keep "
+    "the baselines the file gives them.",
 )  # fmt: skip
 @click.option(
     "--from-record", "record_path", type=click.Path(path_type=Path), default=None,

@@ -43,6 +43,7 @@ PROFILE_KEYS: Final = (
     "address_unit",
     "value_stride",
     "status_word",
+    "rails",
 )
 #: Tables merged key by key with the device's own (``setup``, ``region`` and ``status_word``
 #: are arrays: the device's own replaces the profile's; ``actions`` merge by name).

@@ -101,6 +101,8 @@ POLL_INTERVAL_S: Final = Interval(0.0, 3600.0, low_inclusive=True)
 BACKOFF_INITIAL_S: Final = Interval(0.0, 60.0, low_inclusive=False)
 BACKOFF_MAX_S: Final = 3600.0
 DEAD_AFTER_S: Final = Interval(0.0, 86400.0, low_inclusive=True)
+#: What a converter rail means on a device (``DeviceConfig.rails``).
+RAILS: Final = ("faults", "readings")
 
 
 def check_integer(where: str, name: str, value: object, low: int, high: int, unit: str = "") -> None:
@@ -245,6 +247,12 @@ class DeviceConfig:
     #: seconds a taxel frozen while its region moves takes to read dead (0: not tracked;
     #: ``runtime.dead_taxels``)
     dead_after_s: float = 0.0
+    #: what a converter rail means (``RAILS``): ``faults`` (the open rail an open circuit, the
+    #: short rail a short) or ``readings`` (the open rail no current at rest: no contact, 0 N;
+    #: the short rail more load than the converter resolves: saturated), for read-outs whose
+    #: unloaded taxel reads 0 (a robot hand's raw values); a broken taxel is then found by
+    #: ``dead_after_s``
+    rails: str = "faults"
 
     def __post_init__(self) -> None:
         where = f"device {self.name!r}"
@@ -283,6 +291,7 @@ class DeviceConfig:
                 raise ConfigError(f"{where}: duplicate channel name {channel.name!r}")
             names.add(channel.name)
         check_number(where, "dead_after_s", self.dead_after_s, DEAD_AFTER_S, " s (0: off)")
+        check_choice(where, "rails", self.rails, RAILS)
         first = 0
         for region in self.regions:
             if region.first_channel != first:

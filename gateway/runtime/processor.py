@@ -66,6 +66,7 @@ from .status_tables import (
     _BASE_FROM_DIVIDER,
     _BIG_OHM,
     _CHANNEL_ERROR,
+    _CHANNEL_NO_CONTACT,
     _CHANNEL_NO_ZERO,
     _CHANNEL_OK,
     _CHANNEL_OPEN,
@@ -236,6 +237,8 @@ class DeviceProcessor:
         self._uncalibrated = frozen_copy(uncalibrated) if uncalibrated.any() else None
         self._relative = device.encoding is Encoding.ADC and isinstance(device.front_end, RatioFrontEnd)
         self._dead = tracker_for(device, self.index)
+        # the rails are readings (``rails = "readings"``): read as with the device's bitmaps
+        self._rails_read = device.rails == "readings"
 
     def _tare(self, r_model: FloatArray) -> FloatArray:
         """``r_model`` with each baseline channel's excess conductance taken off."""
@@ -313,7 +316,7 @@ class DeviceProcessor:
                 r, dstat = self.device.front_end.resistance(counts)
                 table = None
                 r_out = np.where(r == np.inf, np.nan, r)  # the open rail has no resistance value
-            if raw.open_bits is None and raw.short_bits is None:
+            if raw.open_bits is None and raw.short_bits is None and not self._rails_read:
                 r_model = table.model_ohm[counts] if table is not None else r
                 return r_out, r_model, _BASE_FROM_DIVIDER[dstat]
             code = dstat * np.int8(4)
@@ -336,7 +339,7 @@ class DeviceProcessor:
             rail_short = r == 0.0
             status[np.isnan(r) | np.isneginf(r) | (r < 0.0)] = _CHANNEL_ERROR
             r_out = np.where(np.isfinite(r) & (r >= 0.0), r, np.nan)
-        if raw.open_bits is None and raw.short_bits is None:
+        if raw.open_bits is None and raw.short_bits is None and not self._rails_read:
             status[rail_open] = _CHANNEL_OPEN
             status[rail_short] = _CHANNEL_SHORT
             return r_out, r, status
@@ -485,9 +488,18 @@ class DeviceProcessor:
         if tracked.unzeroed is not None:
             status = np.where(tracked.unzeroed & (status == _CHANNEL_OK), np.int8(_CHANNEL_NO_ZERO), status)
         if self._uncalibrated is not None:
-            # a reading (the read-out's verdict is OK), no model: uncalibrated
+            # a reading (the read-out's verdict is OK), no model: uncalibrated; but no current
+            # at all (the open rail read as rest, or at or below the zero) is no contact under
+            # any calibration
             readable = self._uncalibrated & (base == _CHANNEL_OK)
+            resting = readable & np.isposinf(tracked.model_resistance_ohm)
+            beyond = readable & np.isnan(tracked.model_resistance_ohm)  # the short rail as a reading
             status = np.where(readable, np.int8(_CHANNEL_UNCALIBRATED), status)
+            status = np.where(resting, np.int8(_CHANNEL_NO_CONTACT), status)
+            status = np.where(beyond, np.int8(_CHANNEL_SATURATED), status)
+            force_n = np.where(resting, 0.0, np.where(beyond, np.nan, tracked.force_n))
+        else:
+            force_n = tracked.force_n
         special = None if raw.special is None or not raw.special.any() else raw.special[self._pick]
         if special is not None:  # declared codes: statuses, never forces
             status = np.where(special == SPECIAL_SATURATED, np.int8(_CHANNEL_SATURATED), status)
@@ -498,7 +510,7 @@ class DeviceProcessor:
             dead_state, dead, dead_by_region = self._dead.step(tracked.state.dead, raw, self._pick, now_s)
             status = np.where(dead, np.int8(_CHANNEL_ERROR), status)
         valued = VALUED[status]
-        force = np.where(valued, tracked.force_n, np.nan)
+        force = np.where(valued, force_n, np.nan)
         if special is not None:
             force = np.where(special != 0, np.nan, force)
         reference = self._no_values

@@ -284,3 +284,21 @@ def test_command_line_refuses_bad_hand_options_precisely(args: list[str], code: 
     result = CliRunner().invoke(main, ["run", *args, "--stop-after", "0"])
     assert result.exit_code == code, result.output
     assert message in result.output and "Traceback" not in result.output
+
+
+def test_rest_offsets_are_each_taxels_own_and_fixed() -> None:
+    clock = Clock()
+    h = HandDevice("idle", clock=clock, noise_lsb=0.0, rest_offset_lsb=150.0, seed=3)
+    first = np.concatenate([h.taxels(r.name) for r in hm.REGIONS])
+    # uniform in 0..300 over 1,062 taxels: mean 150 +- 3 standard errors (86.6 / sqrt(1062) = 2.7)
+    assert 0 <= first.min() and first.max() <= 300
+    assert abs(first.mean() - 150.0) < 8.1
+    assert len(np.unique(first)) > 250  # each its own
+    clock.now_s = 2.0
+    later = np.concatenate([h.taxels(r.name) for r in hm.REGIONS])
+    assert np.array_equal(first, later)  # unloaded: the offset alone, frame after frame
+    # the same seed gives the same skin; the offset is not the noise stream's
+    again = HandDevice("idle", clock=Clock(), noise_lsb=0.0, rest_offset_lsb=150.0, seed=3)
+    assert np.array_equal(np.concatenate([again.taxels(r.name) for r in hm.REGIONS]), first)
+    with pytest.raises(ValueError, match=r"rest_offset_lsb = -1\.0 must be within 0\.\.10000 LSB"):
+        HandDevice("idle", clock=Clock(), rest_offset_lsb=-1.0)
