@@ -121,8 +121,12 @@ class SensorModel:
         self, resistance_ohm: ArrayLike, state: ModelState, temperature_c: ArrayLike | None
     ) -> ModelState:
         """``state`` with every channel of unknown history set to its equilibrium at
-        ``resistance_ohm`` (``equilibrium_state``); the others as they are."""
-        fresh = np.isnan(state.last_force_n)
+        ``resistance_ohm`` (``equilibrium_state``); the others as they are. A channel whose
+        reading is itself invalid (NaN or negative: a special code, a fault) stays unknown, so
+        it costs no equilibrium sweep over the device on every sample."""
+        with np.errstate(invalid="ignore"):
+            readable = np.asarray(resistance_ohm, dtype=np.float64) >= 0.0
+        fresh = np.isnan(state.last_force_n) & readable
         if not fresh.any():
             return state
         _, eq = self.equilibrium_state(resistance_ohm, temperature_c)
