@@ -1,0 +1,2 @@
+// tactile-gateway live page: timeline (filled in by issue 35).
+"use strict";

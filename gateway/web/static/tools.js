@@ -1,0 +1,2 @@
+// tactile-gateway live page: tools (filled in by issue 35).
+"use strict";
