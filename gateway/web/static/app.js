@@ -3,9 +3,10 @@
 // device at most ~30/s). Draws a colour map of forces at the channels' configured positions
 // (y grows downward), channel statuses, the centre of pressure with a short trail, total
 // force and contact area over the last 30 s, and the device's health.
-// The colour scale is in force (N) or pressure (kPa: force over the layout's cell area), its
-// top follows the frame's peak (auto, with hysteresis) or is fixed; settings come from the
-// URL (?scale=auto|fixed&max=2.5&unit=N|kPa&numbers=1) and the controls write them back.
+// The colour scale is in force (N) or pressure (kPa or mmHg: force over the layout's cell area),
+// its top follows the frame's peak (auto, with hysteresis) or is fixed, per device or one for all
+// devices; settings come from the URL (?scale=auto|fixed&max=2.5&unit=N|kPa|mmHg&numbers=1&same=1
+// &threshold=0.2) and the controls write them back. The grid, axes, units and threshold: view.js.
 // A device made of regions (a hand) is drawn region by region, each in its configured place,
 // outlined and named, with the sum of force over each region and each group (a finger, the palm).
 // Playback (tactile-gateway view RECORD): /api/devices says "playback"; the page then reads
@@ -45,7 +46,7 @@ let dirty = true;
 let lastDraw = 0;
 let lastKey = "";
 // the view's settings; read from the URL at start, written back on change
-const view = { mode: "auto", max: null, unit: "N", numbers: false };
+const view = { mode: "auto", max: null, unit: "N", numbers: false, same: false, threshold: null };
 // the colours of the trend chart's lines (and of its key, style.css)
 const LINE_TOTAL = "#f5a623";
 const LINE_REFERENCE = "#6fd27a";
@@ -80,19 +81,8 @@ function fmtValue(v) {
 }
 
 // ---------------------------------------------------------------- scale and units
-// N -> the shown unit's value for one channel (null where there is no value)
-function toUnit(d, force) {
-  if (force === null || force === undefined) return null;
-  if (view.unit === "kPa") return d.layout.cell_area_mm2 ? (force * 1000) / d.layout.cell_area_mm2 : null;
-  return force;
-}
-function unitLabel() { return view.unit === "kPa" ? "kPa" : "N"; }
+// (toUnit, scaleMax, the units and the threshold: view.js)
 function defaultMax(d) { return toUnit(d, d.layout.scale_n[1]) || d.layout.scale_n[1]; }
-// the top of the colour scale for a device, in the shown unit
-function scaleMax(d) {
-  if (view.mode === "fixed") return view.max !== null ? view.max : defaultMax(d);
-  return d.auto && d.auto.unit === view.unit ? d.auto.max : defaultMax(d);
-}
 function framePeak(d, f) {
   let peak = 0;
   f.status.forEach((s, k) => {
@@ -120,12 +110,17 @@ function updateAuto(d, now) {
 
 function readView() {
   const q = new URLSearchParams(location.search);
-  view.unit = (q.get("unit") || "").toLowerCase() === "kpa" ? "kPa" : "N";
+  const unit = (q.get("unit") || "").toLowerCase();
+  view.unit = UNITS.find((u) => u.toLowerCase() === unit) || "N";
   const max = Number.parseFloat(q.get("max") || "");
   view.max = Number.isFinite(max) && max > 0 ? max : null;
   const mode = q.get("scale");
   view.mode = mode === "auto" || mode === "fixed" ? mode : view.max !== null ? "fixed" : "auto";
-  view.numbers = ["1", "true", "on", "yes"].includes((q.get("numbers") || "").toLowerCase());
+  const yes = (v) => ["1", "true", "on", "yes"].includes((v || "").toLowerCase());
+  view.numbers = yes(q.get("numbers"));
+  view.same = yes(q.get("same"));
+  const thr = Number.parseFloat(q.get("threshold") || "");
+  view.threshold = Number.isFinite(thr) && thr > 0 ? thr : null;
 }
 function writeView() {
   const q = new URLSearchParams(location.search);
@@ -133,11 +128,15 @@ function writeView() {
   if (view.max !== null) q.set("max", String(view.max)); else q.delete("max");
   q.set("unit", view.unit);
   if (view.numbers) q.set("numbers", "1"); else q.delete("numbers");
+  if (view.same) q.set("same", "1"); else q.delete("same");
+  if (view.threshold !== null) q.set("threshold", String(view.threshold)); else q.delete("threshold");
   history.replaceState(null, "", `${location.pathname}?${q}${location.hash}`);
 }
 function showControls() {
   $("scale-mode").value = view.mode;
   $("unit").value = view.unit;
+  $("ov-unit").value = view.unit;
+  $("same-scale").checked = view.same;
   $("numbers").checked = view.numbers;
   $("scale-max-unit").textContent = unitLabel();
   const d = selected && devices.get(selected);
@@ -254,10 +253,11 @@ function drawMap(canvas, d, opts) {
   let numbers = 0;
   const stale = deviceState(d, performance.now()) === "stale";
   if (opts.smooth && f) drawSmooth(ctx, d, tr, max);
+  drawGrid(ctx, d, tr);
   d.layout.channels.forEach((c, k) => {
     const side = geo.side ? tr.s * geo.side[k] * 0.92 : cellSide;
     const status = f ? f.status[k] : ST.STALE;
-    const value = f ? toUnit(d, f.force_n[k]) : null;
+    const value = f ? shownValue(d, f, k) : null;
     const x = tr.px(c.x_mm) - side / 2;
     const y = tr.py(c.y_mm) - side / 2;
     let label = null;
@@ -385,7 +385,7 @@ function drawSmooth(ctx, d, tr, max) {
   const pts = [];
   d.layout.channels.forEach((c, k) => {
     const s = f.status[k];
-    if (VALUED.has(s)) pts.push([c.x_mm, c.y_mm, toUnit(d, f.force_n[k]) || 0]);
+    if (VALUED.has(s)) pts.push([c.x_mm, c.y_mm, shownValue(d, f, k) || 0]);
   });
   for (let j = 0; j < n; j++) {
     const ym = geo.y0 + ((j + 0.5) / n) * (geo.y1 - geo.y0);
@@ -518,12 +518,15 @@ function updateText(d, now) {
   $("summary").classList.toggle("stale", st === "stale");
   $("summary-old").hidden = st !== "stale";
   if (!f) return;
-  $("total-force").textContent = fmt(f.total_force_n, 3);
-  $("cop-x").textContent = f.cop_mm ? fmt(f.cop_mm[0], 2) : "–";
-  $("cop-y").textContent = f.cop_mm ? fmt(f.cop_mm[1], 2) : "–";
-  $("area").textContent = fmt(f.contact_area_mm2, 2);
-  $("in-contact").textContent = String(f.channels_in_contact);
-  $("peak").textContent = f.peak_channel ? `${f.peak_channel} ${fmt(f.peak_force_n, 3)} N` : "–";
+  const st2 = frameStats(d, f, null);
+  $("total-force").textContent = fmtU(totalInUnit(st2.total_n, st2.area_mm2));
+  $("total-unit").textContent = unitLabel();
+  $("total-label").textContent = view.unit === "N" ? "total force" : "mean pressure over the contact area";
+  $("cop-x").textContent = st2.cop ? fmt(st2.cop[0], 2) : "–";
+  $("cop-y").textContent = st2.cop ? fmt(st2.cop[1], 2) : "–";
+  $("area").textContent = fmt(st2.area_mm2, 2);
+  $("in-contact").textContent = String(st2.in_contact);
+  $("peak").textContent = st2.peak ? `${st2.peak} ${fmtU(toUnit(d, st2.peak_n))} ${unitLabel()}` : "–";
   $("health-up").textContent = f.up ? "up" : `not answering${f.error ? ": " + f.error : ""}`;
   $("health-up").title = $("health-up").textContent;
   const p = d.polls;
@@ -596,13 +599,15 @@ function showWhatIsOn(lines) {
 // the colour key: redrawn when its range, unit or mode changes
 function drawKey(d) {
   const max = scaleMax(d);
-  const title = view.unit === "kPa" ? "pressure, kPa" : "force, N";
-  const key = `${max} ${view.unit} ${view.mode}`;
+  const title = view.unit === "N" ? "force, N" : `pressure, ${view.unit}`;
+  showThreshold(d);
+  const key = `${max} ${view.unit} ${rangeWords()} ${threshold()}`;
   if (key === lastKey) return;
   lastKey = key;
   drawScale($("scale"), max, title);
   $("scale").setAttribute("aria-label", `colour scale, ${title}`);
-  $("scale-range").textContent = `0–${fmtValue(max)} ${unitLabel()} (${view.mode})`;
+  $("scale-range").textContent = `0–${fmtValue(max)} ${unitLabel()} (${rangeWords()})`;
+  markThreshold($("scale"), max);
   $("map").dataset.max = String(max);
   showControls();
 }
@@ -618,6 +623,7 @@ function render() {
       drawKey(d);
       drawMap($("map"), d, { margin: 12, smooth: $("smooth").checked, trail: true, numbers: view.numbers });
       placeRegions(d, $("map"), 12);
+      placeAxes(d, $("map"), 12);
       updateSums(d);
       updateStatusWords(d.frame);
       drawHistory($("history"), d);
@@ -627,8 +633,12 @@ function render() {
         if (!d.card) continue;
         drawMap(d.card.canvas, d, { margin: 6, smooth: false, trail: true, outlines: true });
         const f = d.frame;
-        d.card.info.textContent = `${deviceState(d, now)} · ${f ? fmt(f.total_force_n, 2) : "–"} N`;
+        const own = view.same ? "" : ` · key 0–${fmtValue(scaleMax(d))} ${unitLabel()}`;
+        const total = f ? fmtU(totalInUnit(f.total_force_n, f.contact_area_mm2)) : "–";
+        const what = view.unit === "N" ? "total" : "mean";
+        d.card.info.textContent = `${deviceState(d, now)} · ${what} ${total} ${unitLabel()}${own}`;
       }
+      drawOverviewKey();
     }
   }
   requestAnimationFrame(render);
@@ -748,9 +758,9 @@ function hover(ev) {
   const f = d.frame;
   const status = d.layout.status_labels[f.status[best]] || "?";
   const force = f.force_n[best];
-  const kpa = force === null || !d.layout.cell_area_mm2 ? null : (force * 1000) / d.layout.cell_area_mm2;
+  const p = view.unit === "N" ? null : toUnit(d, force);
   const value = force === null ? "no value"
-    : `${force.toFixed(3)} N${view.unit === "kPa" && kpa !== null ? `, ${kpa.toFixed(1)} kPa` : ""}`;
+    : `${force.toFixed(3)} N${p !== null ? `, ${p.toFixed(1)} ${view.unit}` : ""}`;
   tip.textContent = `${c.name} (${c.x_mm}, ${c.y_mm} mm): ${value}, ${status}`;
   tip.style.left = `${ev.clientX - rect.left + 14}px`;
   tip.style.top = `${ev.clientY - rect.top + 14}px`;
@@ -771,12 +781,21 @@ function main() {
   showControls();
   const changed = () => { writeView(); showControls(); lastKey = ""; dirty = true; };
   $("scale-mode").addEventListener("change", () => { view.mode = $("scale-mode").value; changed(); });
-  $("unit").addEventListener("change", () => {
-    view.unit = $("unit").value;
+  const setUnit = (unit) => {
+    const was = view.unit;
+    view.unit = unit;
     view.max = null; // a maximum is in its unit
+    // a threshold is kept between kPa and mmHg, else it is in its unit and dropped
+    view.threshold = view.threshold === null ? null : convertPressure(view.threshold, was, unit);
     for (const d of devices.values()) updateAuto(d, performance.now());
     changed();
-  });
+  };
+  $("unit").addEventListener("change", () => setUnit($("unit").value));
+  $("ov-unit").addEventListener("change", () => setUnit($("ov-unit").value));
+  $("same-scale").addEventListener("change", () => { view.same = $("same-scale").checked; changed(); });
+  const thresholdFrom = (el) => { setThreshold(Number.parseFloat(el.value)); changed(); };
+  $("threshold").addEventListener("change", () => thresholdFrom($("threshold")));
+  $("threshold-slider").addEventListener("input", () => thresholdFrom($("threshold-slider")));
   $("scale-max").addEventListener("change", () => {
     const v = Number.parseFloat($("scale-max").value);
     view.max = Number.isFinite(v) && v > 0 ? v : null;
