@@ -141,8 +141,11 @@ class Inverter:
                 # fmax/fmin rather than clip: a NaN or infinite guess starts at the range end
                 g = np.fmin(np.fmax(np.asarray(guess_n, dtype=np.float64), fmin), fmax)
                 u = np.log(g) if g.shape == shape else np.log(g) + np.zeros(shape)
-            if guess_n is None or not self._newton_fast(u, lo, hi, target, strain, r0t):
-                u = self._newton(u, lo + np.zeros(shape), hi + np.zeros(shape), target, strain, r0t)
+            # only the solved channels' convergence counts: the others stand in at a range
+            # end, where with the state's strain their root may lie just outside the bracket
+            care = None if all_solve else solve
+            if guess_n is None or not self._newton_fast(u, lo, hi, target, strain, r0t, care):
+                u = self._newton(u, lo + np.zeros(shape), hi + np.zeros(shape), target, strain, r0t, care)
             if all_solve:
                 np.exp(u, out=force)
             else:
@@ -157,6 +160,7 @@ class Inverter:
         target: FloatArray,
         state_strain: FloatArray,
         r0: FloatArray,
+        care: NDArray[np.bool_] | None = None,
         max_iter: int = 4,
     ) -> bool:
         """Plain Newton (clipped to the range) from a close guess, in place; True if converged.
@@ -169,6 +173,8 @@ class Inverter:
             g, slope = step_of(u, target, state_strain, r0)
             step = g / slope
             np.minimum(np.maximum(u - step, lo), hi, out=u)
+            if care is not None:
+                step = step[care]
             if float(np.abs(step).max(initial=0.0)) < _NEWTON_STOP_STEP:
                 return True
         return False
@@ -181,8 +187,10 @@ class Inverter:
         target: FloatArray,
         state_strain: FloatArray,
         r0: FloatArray,
+        care: NDArray[np.bool_] | None = None,
     ) -> FloatArray:
-        """Safeguarded Newton on ln R(e^u) = target, with a bisection bracket [lo, hi]."""
+        """Safeguarded Newton on ln R(e^u) = target, with a bisection bracket [lo, hi]; done when
+        the channels of ``care`` (default all) have converged."""
         for _ in range(_NEWTON_MAX_ITER):
             g, slope = self.ev.log_gap_and_slope(u, target, state_strain, r0)
             np.copyto(lo, u, where=g > 0.0)
@@ -190,8 +198,13 @@ class Inverter:
             step = g / slope
             new = u - step
             outside = ~((new >= lo) & (new <= hi))
-            largest = float(np.max(np.abs(step), initial=0.0))
-            if largest < _NEWTON_STOP_STEP and not outside.any():
+            if care is None:
+                largest = float(np.max(np.abs(step), initial=0.0))
+                escaped = bool(outside.any())
+            else:
+                largest = float(np.max(np.abs(step[care]), initial=0.0))
+                escaped = bool(outside[care].any())
+            if largest < _NEWTON_STOP_STEP and not escaped:
                 # quadratic convergence: the error after a step this small is far below 1e-12
                 return new
             u = np.where(outside, 0.5 * (lo + hi), new)
