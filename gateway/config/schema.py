@@ -308,6 +308,17 @@ class DeviceConfig:
         return self.layout.columns
 
     @property
+    def cell_areas_mm2(self) -> float | tuple[float, ...]:
+        """The area of each channel's cell (mm^2): one for the device's one grid, or per channel
+        for a device made of regions, each region's pitch x pitch (regions may differ)."""
+        if not self.regions:
+            return self.layout.cell_area_mm2
+        areas: list[float] = []
+        for region in self.regions:
+            areas.extend([region.pitch_x_mm * region.pitch_y_mm] * region.n_channels)
+        return tuple(areas)
+
+    @property
     def pitch_mm(self) -> float:
         """The pitch along x (mm); ``layout`` has both."""
         return self.layout.pitch_x_mm

@@ -237,8 +237,19 @@ class DeviceProcessor:
         self._uncalibrated = frozen_copy(uncalibrated) if uncalibrated.any() else None
         self._relative = device.encoding is Encoding.ADC and isinstance(device.front_end, RatioFrontEnd)
         self._dead = tracker_for(device, self.index)
+        areas = device.cell_areas_mm2
+        self._cell_areas_mm2: float | FloatArray = (
+            areas
+            if isinstance(areas, float)
+            else frozen_copy(np.asarray(areas, dtype=np.float64)[self.index])
+        )
         # the rails are readings (``rails = "readings"``): read as with the device's bitmaps
         self._rails_read = device.rails == "readings"
+
+    @property
+    def cell_areas_mm2(self) -> float | FloatArray:
+        """The cell area (mm^2): one for every cell, or one per enabled channel (regions)."""
+        return self._cell_areas_mm2
 
     def _tare(self, r_model: FloatArray) -> FloatArray:
         """``r_model`` with each baseline channel's excess conductance taken off."""
@@ -472,7 +483,7 @@ class DeviceProcessor:
         if raw.output_force_n is not None:
             return np.asarray(raw.output_force_n[self._pick], dtype=np.float64)
         if raw.output_pressure_kpa is not None:
-            area_mm2 = self.device.layout.cell_area_mm2
+            area_mm2 = self._cell_areas_mm2
             return np.asarray(raw.output_pressure_kpa[self._pick], dtype=np.float64) * (area_mm2 * 1e-3)
         raise DecodeError("a device with a calibrated output needs its force or pressure values")
 
@@ -516,7 +527,7 @@ class DeviceProcessor:
         reference = self._no_values
         if raw.reference_force_n is not None:
             reference = read_only(np.array(raw.reference_force_n[self._pick], dtype=np.float64))
-        q = array_quantities(force, status, self.x_mm, self.y_mm, self.device.layout.cell_area_mm2)
+        q = array_quantities(force, status, self.x_mm, self.y_mm, self._cell_areas_mm2)
         wall_time_s = tracked.wall_time_s
         inputs = (
             self.groups,

@@ -269,7 +269,7 @@ def held_snapshots(
     empty = np.zeros(0)
     no_static = (), empty, None, np.zeros(0, dtype=bool), empty
     q = _quantities(force, status, processor.x_mm, processor.y_mm)
-    area = processor.device.layout.cell_area_mm2
+    area_mm2 = _contact_areas(force, status, processor.cell_areas_mm2)
     names = processor.names
     out: list[DeviceSnapshot] = []
     columns = zip(run.sample_time_s[chosen].tolist(), *(a.tolist() for a in q), strict=True)
@@ -286,13 +286,23 @@ def held_snapshots(
             total_force_n=total,
             center_of_pressure_mm=None if n_contact == 0 else (x, y),
             channels_in_contact=n_contact,
-            contact_area_mm2=float(n_contact * area),
+            contact_area_mm2=float(area_mm2[i]),
             peak_channel=None if n_contact == 0 else names[peak],
             peak_force_n=None if n_contact == 0 else float(force[i, peak]),
             temperature_c=read_only(temperature[i]) if has_temperature else None,
         )
         out.append(DeviceSnapshot(**fixed))
     return out, n_samples
+
+
+def _contact_areas(
+    force_n: FloatArray, status: NDArray[np.int8], cell_area_mm2: float | FloatArray
+) -> FloatArray:
+    """The contact area (mm^2) of each row: the cells in contact, each of its own area."""
+    contact = IN_CONTACT[status] & (force_n > 0.0)
+    if isinstance(cell_area_mm2, float):
+        return np.asarray(np.count_nonzero(contact, axis=1) * cell_area_mm2, dtype=np.float64)
+    return np.asarray(contact.astype(np.float64) @ cell_area_mm2, dtype=np.float64)
 
 
 def _quantities(

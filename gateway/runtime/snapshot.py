@@ -365,12 +365,17 @@ class ArrayQuantities:
 
 
 def array_quantities(
-    force_n: FloatArray, status: StatusArray, x_mm: FloatArray, y_mm: FloatArray, cell_area_mm2: float
+    force_n: FloatArray,
+    status: StatusArray,
+    x_mm: FloatArray,
+    y_mm: FloatArray,
+    cell_area_mm2: float | FloatArray,
 ) -> ArrayQuantities:
     """Total force (N), centre of pressure (mm), contact area (mm^2) and peak channel.
 
     The centre of pressure is sum(F_i x_i) / sum(F_i) over channels in contact; it is None
-    (not NaN) when nothing is in contact. Contact area = channels in contact x cell area.
+    (not NaN) when nothing is in contact. Contact area = the sum of the cell areas of the
+    channels in contact (``cell_area_mm2``: one for every cell, or one per channel).
     """
     f = np.asarray(force_n, dtype=np.float64)
     contact = IN_CONTACT[np.asarray(status)] & (f > 0.0)  # NaN is never > 0
@@ -381,7 +386,11 @@ def array_quantities(
     total = float(fc.sum())
     cop = (float(np.dot(fc, x_mm)) / total, float(np.dot(fc, y_mm)) / total)
     peak = int(fc.argmax())  # forces in contact are > 0, the rest 0
-    return ArrayQuantities(total, cop, n, float(n * cell_area_mm2), peak, float(f[peak]))
+    if isinstance(cell_area_mm2, float | int):
+        area = float(n * cell_area_mm2)
+    else:
+        area = float(np.asarray(cell_area_mm2, dtype=np.float64)[contact].sum())
+    return ArrayQuantities(total, cop, n, area, peak, float(f[peak]))
 
 
 @dataclass(frozen=True)
