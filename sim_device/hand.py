@@ -36,6 +36,7 @@ from . import hand_map as hm
 from .array import SimArray
 from .config import ArrayConfig
 from .hand_scenarios import HandScenario, TaxelSpec, load_hand_scenario
+from .maps import VENDOR_NAME, package_version
 
 FRAME_RATE_HZ = 30.0
 FRAME_PERIOD_S = 1.0 / FRAME_RATE_HZ
@@ -142,6 +143,16 @@ class HandDevice:
         self.force_calibrations = 0
         self._joint_t = 0.0
         self._refresh()
+
+    def identity(self) -> dict[str, str]:
+        """Device identification objects (Modbus function 43 / MEI 14), by name: a hand."""
+        return {
+            "VendorName": VENDOR_NAME,
+            "ProductCode": "TSA-HAND",
+            "MajorMinorRevision": package_version(),
+            "ProductName": "Simulated dexterous hand with a tactile skin",
+            "ModelName": f"hand {hm.N_TAXELS} taxels in {len(hm.REGIONS)} regions",
+        }
 
     @staticmethod
     def _masks(specs: Sequence[TaxelSpec]) -> dict[str, NDArray[np.bool_]]:

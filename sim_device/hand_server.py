@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import AsyncIterator
+from typing import Any, cast
 
 from pymodbus.constants import ExcCodes
 from pymodbus.framer import FramerType
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from . import hand_map as hm
+from .array import SimArray
 from .hand import HandDevice, HandWriteError
 from .modbus_server import (
     LineTiming,
@@ -97,6 +99,25 @@ def _prepare(hand: HandDevice) -> list[SimDevice]:
     return [HandBinding(hand).device]
 
 
+class _HandFace:
+    """The palm's array as the server's device (its clock and faults), answering function 43
+    with the hand's identification rather than the palm grid's."""
+
+    def __init__(self, hand: HandDevice) -> None:
+        self._hand = hand
+        self._palm = hand.arrays["palm"]
+
+    def identity(self) -> dict[str, str]:
+        return self._hand.identity()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._palm, name)
+
+
+def _face(hand: HandDevice) -> SimArray:
+    return cast(SimArray, _HandFace(hand))
+
+
 @contextlib.asynccontextmanager
 async def serve_hand_tcp(
     hand: HandDevice, host: str = "127.0.0.1", port: int = 0, framer: str = "socket"
@@ -106,7 +127,7 @@ async def serve_hand_tcp(
     if framer not in ("socket", "rtu"):
         raise ValueError(f'framer must be "socket" or "rtu", got {framer!r}')
     server = _TcpServer(_prepare(hand), framer=FramerType(framer), address=(host, port))
-    palm = hand.arrays["palm"]
+    palm = _face(hand)
     _configure(server, [palm], framer == "rtu", False, None)
     await _start(server, f"{host}:{port}")
     bound = server.transport.sockets[0].getsockname()[1]  # type: ignore[attr-defined]
@@ -128,7 +149,7 @@ async def serve_hand_serial(
         raise ValueError(f"baudrate must be a positive integer, got {baudrate!r}")
     _check_serial_device(port)
     server = _SerialServer(_prepare(hand), framer=FramerType.RTU, port=port, baudrate=baudrate)
-    palm = hand.arrays["palm"]
+    palm = _face(hand)
     _configure(server, [palm], True, True, LineTiming(baudrate, turnaround_s) if line_timing else None)
     await _start(server, f"serial device {port}")
     async with _running(SimServer(server, [palm], "serial", "", 0, port), None) as sim:

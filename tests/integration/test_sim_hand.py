@@ -106,6 +106,11 @@ async def test_frames_change_at_30_hz_by_the_device_clock() -> None:
             clock.advance(0.6 * FRAME_PERIOD_S)
             later, _ = await read_block(client, palm, 112)
             assert later != first
+            # function 43 names the hand, not the palm's grid
+            response = await client.read_device_information(read_code=2, device_id=1)
+            assert not response.isError(), response
+            assert response.information[4] == b"Simulated dexterous hand with a tactile skin"
+            assert response.information[5] == b"hand 1062 taxels in 17 regions"
         finally:
             client.close()
 
