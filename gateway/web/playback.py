@@ -7,7 +7,9 @@ device sample in time order (or those ``thin`` keeps of them, with the record's 
 ``frames.frame_json`` of each snapshot, the same shape, so ``app.js`` draws them with the same
 code, rounded over all frames at once), each with one more member,
 ``reference_total_force_n``: the sum of the record's reference forces at that sample (N;
-``null`` when the record has no ``force_n`` column).
+``null`` when the record has no ``force_n`` column), and for a record with a reference,
+``reference_force_n``: each channel's reference force (N; ``null`` where it has none), so
+the page shows the error per channel.
 
 ``PlaybackPage(playback).install(app)`` serves:
 
@@ -27,7 +29,7 @@ import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NotRequired
 
 import numpy as np
 from aiohttp import web
@@ -46,6 +48,7 @@ class PlaybackFrame(PageFrame):
     """A live page's frame with the record's reference total force (N; None: no reference)."""
 
     reference_total_force_n: float | None
+    reference_force_n: NotRequired[list[float | None]]
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,11 @@ def page_frames(snapshots: Sequence[DeviceSnapshot], *, has_reference: bool) -> 
         return []
     n = snapshots[0].n_channels
     flat = finite_or_none(np.stack([s.force_n for s in snapshots]).astype(np.float64), DECIMALS)
+    refs = (
+        finite_or_none(np.stack([s.reference_force_n for s in snapshots]).astype(np.float64), DECIMALS)
+        if has_reference
+        else None
+    )
     statuses = np.stack([s.status for s in snapshots]).astype(np.int64).tolist()
     counters = DeviceCounters()
     read_errors = sum(counters.read_errors_total.values())
@@ -97,7 +105,7 @@ def page_frames(snapshots: Sequence[DeviceSnapshot], *, has_reference: bool) -> 
         cop = snap.center_of_pressure_mm
         lo = (seq - 1) * n
         reference = finite_or_none(reference_total_n(snap), DECIMALS) if has_reference else None
-        out.append({
+        frame: PlaybackFrame = {
             "device": snap.device,
             "seq": seq,
             "t": round(float(snap.timestamp_s), DECIMALS),
@@ -118,7 +126,10 @@ def page_frames(snapshots: Sequence[DeviceSnapshot], *, has_reference: bool) -> 
             "reads_total": counters.reads_total,
             "read_errors_total": read_errors,
             "reference_total_force_n": reference,
-        })  # fmt: skip
+        }  # fmt: skip
+        if refs is not None:
+            frame["reference_force_n"] = refs[lo : lo + n]
+        out.append(frame)
     return out
 
 

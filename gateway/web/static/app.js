@@ -53,6 +53,8 @@ const LINE_REFERENCE = "#6fd27a";
 const LINE_AREA = "#5fb3ff";
 // playback of a record: null when live
 let playback = null;
+// what the server serves: "live" (a gateway) or "playback" (a record); null before /api/devices
+let source = null;
 
 function $(id) { return document.getElementById(id); }
 
@@ -179,12 +181,13 @@ async function loadDevices() {
   if (!resp.ok) throw new Error(`/api/devices: ${resp.status}`);
   const data = await resp.json();
   const names = new Set();
+  source = data.playback ? "playback" : "live";
   for (const layout of data.devices) {
     names.add(layout.name);
     const old = devices.get(layout.name);
     devices.set(layout.name, {
       layout, geo: geometry(layout), frame: old ? old.frame : null, arrived: old ? old.arrived : 0,
-      auto: old ? old.auto : null,
+      auto: old ? old.auto : null, historySource: old ? old.historySource : null,
       history: old ? old.history : [], trail: old ? old.trail : [], polls: old ? old.polls : [],
     });
   }
@@ -206,8 +209,8 @@ function onFrame(f) {
   d.frame = f;
   d.arrived = now;
   if (f.t !== null) {
-    d.history.push([f.t, f.total_force_n, f.contact_area_mm2, refTotal(f)]);
-    while (d.history.length && d.history[0][0] < f.t - HISTORY_S) d.history.shift();
+    d.history.push(histPoint(f));
+    while (d.history.length && d.history[0].t < f.t - HISTORY_S) d.history.shift();
     if (f.cop_mm) d.trail.push([f.t, f.cop_mm[0], f.cop_mm[1]]);
     while (d.trail.length && d.trail[0][0] < f.t - TRAIL_S) d.trail.shift();
   }
@@ -250,9 +253,12 @@ function drawMap(canvas, d, opts) {
   const f = d.frame;
   const max = scaleMax(d);
   const cellSide = tr.s * geo.pitch * 0.92;
+  // playback's difference or error map: signed values on a diverging key (timeline.js)
+  const signed = opts.main && signedMode() ? signedValues() : null;
+  const smax = signed ? signedMax(signed) : null;
   let numbers = 0;
   const stale = deviceState(d, performance.now()) === "stale";
-  if (opts.smooth && f) drawSmooth(ctx, d, tr, max);
+  if (opts.smooth && f && !signed) drawSmooth(ctx, d, tr, max);
   drawGrid(ctx, d, tr);
   d.layout.channels.forEach((c, k) => {
     const side = geo.side ? tr.s * geo.side[k] * 0.92 : cellSide;
@@ -264,13 +270,13 @@ function drawMap(canvas, d, opts) {
     let number = null;
     let ink = "#fff";
     if (VALUED.has(status)) {
-      const fill = colour(value || 0, max);
-      if (!opts.smooth) {
+      const fill = signed ? divergingColour(signed[k] || 0, smax) : colour(value || 0, max);
+      if (!opts.smooth || signed) {
         ctx.fillStyle = rgb(fill);
         ctx.fillRect(x, y, side, side);
       }
       if (opts.numbers && value !== null) {
-        number = fmtValue(value);
+        number = fmtValue(signed ? signed[k] || 0 : value);
         ink = opts.smooth || 0.3 * fill[0] + 0.59 * fill[1] + 0.11 * fill[2] < 140 ? "#fff" : "#000";
       }
       if (status === ST.SATURATED) {
@@ -459,56 +465,7 @@ function drawScale(canvas, max, title) {
   }
 }
 
-function drawHistory(canvas, d) {
-  const ctx = canvas.getContext("2d");
-  const w = canvas.width;
-  const h = canvas.height;
-  ctx.clearRect(0, 0, w, h);
-  const l = 56;
-  const r = w - 64;
-  const t = 22;
-  const b = h - 24;
-  ctx.strokeStyle = "#444";
-  ctx.strokeRect(l, t, r - l, b - t);
-  const hist = d.history;
-  const tEnd = hist.length ? hist[hist.length - 1][0] : 0;
-  const hasRef = hist.some((p) => p[3] !== null && p[3] !== undefined);
-  const fMax = Math.max(d.layout.scale_n[1], ...hist.map((p) => Math.max(p[1] || 0, p[3] || 0)));
-  const aMax = Math.max(1, ...hist.map((p) => p[2] || 0));
-  ctx.font = "12px sans-serif";
-  ctx.fillStyle = "#e6e9ee";
-  ctx.textBaseline = "middle";
-  ctx.textAlign = "left";
-  ctx.fillText("total force (N, left) and contact area (mm², right), last 30 s", l, 10);
-  ctx.textAlign = "right";
-  ctx.fillText(fMax.toFixed(1), l - 6, t);
-  ctx.fillText("0", l - 6, b);
-  ctx.textAlign = "left";
-  ctx.fillText(aMax.toFixed(0), r + 6, t);
-  ctx.fillText("0", r + 6, b);
-  ctx.textAlign = "center";
-  ctx.fillText("-30 s", l, b + 12);
-  ctx.fillText("now", r, b + 12);
-  const series = (idx, max, style, dash) => {
-    ctx.strokeStyle = style;
-    ctx.lineWidth = 2;
-    ctx.setLineDash(dash || []);
-    ctx.beginPath();
-    hist.forEach((p, i) => {
-      const x = r - ((tEnd - p[0]) / HISTORY_S) * (r - l);
-      const y = b - ((p[idx] || 0) / max) * (b - t);
-      if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
-    });
-    ctx.stroke();
-    ctx.setLineDash([]);
-  };
-  series(1, fMax, LINE_TOTAL);
-  if (hasRef) series(3, fMax, LINE_REFERENCE, [6, 4]);
-  series(2, aMax, LINE_AREA);
-  // the key under the chart names each line drawn
-  $("key-reference").hidden = !hasRef;
-  canvas.dataset.reference = hasRef ? "1" : "0";
-}
+// (drawHistory, the trend chart: timeline.js)
 
 function updateText(d, now) {
   const f = d.frame;
@@ -580,6 +537,7 @@ function route() {
     $("regions").dataset.key = "";
     lastKey = "";
     showWhatIsOn(devices.get(selected).layout.what_is_on || []);
+    loadHistory(devices.get(selected));
   }
   dirty = true;
 }
@@ -598,6 +556,7 @@ function showWhatIsOn(lines) {
 
 // the colour key: redrawn when its range, unit or mode changes
 function drawKey(d) {
+  if (playback && signedMode()) { drawSignedKey(d); return; }
   const max = scaleMax(d);
   const title = view.unit === "N" ? "force, N" : `pressure, ${view.unit}`;
   showThreshold(d);
@@ -621,7 +580,7 @@ function render() {
     if (selected && devices.has(selected)) {
       const d = devices.get(selected);
       drawKey(d);
-      drawMap($("map"), d, { margin: 12, smooth: $("smooth").checked, trail: true, numbers: view.numbers });
+      drawMap($("map"), d, { margin: 12, smooth: $("smooth").checked, trail: true, numbers: view.numbers, main: true });
       placeRegions(d, $("map"), 12);
       placeAxes(d, $("map"), 12);
       updateSums(d);
@@ -642,6 +601,18 @@ function render() {
     }
   }
   requestAnimationFrame(render);
+}
+
+// the key of playback's difference or error map: symmetric about zero
+function drawSignedKey(d) {
+  const smax = signedMax(signedValues());
+  const words = signedWords();
+  const key = `signed ${smax} ${view.unit} ${words}`;
+  if (key === lastKey) return;
+  lastKey = key;
+  drawSignedScale($("scale"), smax, `${mapMode.mode === "diff" ? "B − A" : "error"}, ${unitLabel()}`);
+  $("scale-range").textContent = `${fmtValue(-smax)}…${fmtValue(smax)} ${unitLabel()} (${words})`;
+  $("map").dataset.max = String(smax);
 }
 
 // ---------------------------------------------------------------- playback
@@ -676,7 +647,7 @@ function seek(t) {
   d.trail = [];
   for (let i = k; i >= 0 && pb.frames[i].t >= f.t - HISTORY_S; i--) {
     const g = pb.frames[i];
-    d.history.unshift([g.t, g.total_force_n, g.contact_area_mm2, refTotal(g)]);
+    d.history.unshift(histPoint(g));
     if (g.t >= f.t - TRAIL_S && g.cop_mm) d.trail.unshift([g.t, g.cop_mm[0], g.cop_mm[1]]);
   }
   updateAuto(d, performance.now());
@@ -699,7 +670,10 @@ function tickPlayback(now) {
   if (!pb.playing) return;
   if (pb.tick !== null) {
     seek(pb.t + ((now - pb.tick) / 1000) * pb.speed);
-    if (pb.t >= pb.end) { setPlaying(false); return; }
+    if (pb.t >= pb.end) {
+      if (loopAtEnd()) pb.tick = now; else setPlaying(false);
+      return;
+    }
   }
   pb.tick = now;
 }
@@ -733,6 +707,7 @@ async function startPlayback(info) {
   }
   seek(data.start_s);
   setPlaying(false);
+  startPlaybackTools();
   document.body.dataset.playback = "ready";
 }
 
@@ -761,7 +736,12 @@ function hover(ev) {
   const p = view.unit === "N" ? null : toUnit(d, force);
   const value = force === null ? "no value"
     : `${force.toFixed(3)} N${p !== null ? `, ${p.toFixed(1)} ${view.unit}` : ""}`;
-  tip.textContent = `${c.name} (${c.x_mm}, ${c.y_mm} mm): ${value}, ${status}`;
+  const ref = f.reference_force_n ? f.reference_force_n[best] : null;
+  const against = ref === null || ref === undefined || force === null ? ""
+    : `, reference ${ref.toFixed(3)} N, error ${force - ref >= 0 ? "+" : ""}${(force - ref).toFixed(3)} N`;
+  const signed = playback && signedMode() && mapMode.mode === "diff" ? signedValues()[best] : null;
+  const diff = signed === null ? "" : `, B − A ${signed >= 0 ? "+" : ""}${fmtU(signed)} ${unitLabel()}`;
+  tip.textContent = `${c.name} (${c.x_mm}, ${c.y_mm} mm): ${value}, ${status}${against}${diff}`;
   tip.style.left = `${ev.clientX - rect.left + 14}px`;
   tip.style.top = `${ev.clientY - rect.top + 14}px`;
   tip.hidden = false;

@@ -75,7 +75,13 @@ def test_frames_carry_the_recorded_forces_and_hand_computed_totals(tmp_path: Pat
     # the same members as a live frame, plus the reference total
     from gateway.web.frames import frame_json
 
-    assert set(pb.frames[0]) == set(frame_json(snaps[0], 1, None)) | {"reference_total_force_n"}
+    assert set(pb.frames[0]) == set(frame_json(snaps[0], 1, None)) | {
+        "reference_total_force_n",
+        "reference_force_n",
+    }
+    # each channel's reference, as recorded (the page's error per channel is force - this)
+    for frame, reference in zip(pb.frames, REFERENCE, strict=True):
+        assert frame["reference_force_n"] == pytest.approx(reference, abs=1e-9)
     assert [c["name"] for c in pb.layout["channels"]] == ["ch00", "ch01", "ch02", "ch03"]
     assert pb.layout["cell_area_mm2"] == pytest.approx(6.25)
 
@@ -84,6 +90,7 @@ def test_without_a_reference_column_the_reference_is_null(tmp_path: Path) -> Non
     snaps, has_ref, _ = record_snapshots(read_record(write(tmp_path, with_reference=False)), line_device())
     pb = playback_frames(snaps, has_reference=has_ref)
     assert not has_ref and all(f["reference_total_force_n"] is None for f in pb.frames)
+    assert all("reference_force_n" not in f for f in pb.frames)
 
 
 def test_no_snapshot_is_refused() -> None:
