@@ -69,6 +69,7 @@ from .discrepancy_static import (
 from .fitting import FitData, FitResult, Gap, fit_channel, parameters_for
 from .load_history import StartLoad, channel_start_load
 from .measurement import noise_model, time_is_real
+from .parallel import Workers
 from .records import ChannelRecord
 from .rivals import Rivals, verdict
 
@@ -295,6 +296,7 @@ def run_discrepancy(
     max_steps: int = 6,
     metadata: Mapping[str, str] | None = None,
     alternatives: Alternatives | None = None,
+    jobs: int | None = 1,
 ) -> DiscrepancyReport:
     """Run the workflow on one channel (see the module docstring; ``baseline``: ``parse_baseline``).
 
@@ -302,8 +304,34 @@ def run_discrepancy(
     gets the fit data and returns (name, held-out force RMS on ``data.test``) pairs. By default
     they are every static curve with every drift form ``calibrate`` ranks (``candidates``),
     fitted on the same rows, so the two commands name the same best empirical calibration.
+    ``jobs``: the processes a step's candidate fits may use (``parallel.Workers``; None: every
+    core), the same report with any.
     """
-    meta = dict(metadata or {})
+    with Workers(jobs, spare_caller=False) as workers:
+        return _run_discrepancy(
+            channel,
+            baseline,
+            candidates,
+            prior,
+            record_name,
+            max_steps,
+            dict(metadata or {}),
+            alternatives,
+            workers,
+        )
+
+
+def _run_discrepancy(
+    channel: ChannelRecord,
+    baseline: Iterable[str] | None,
+    candidates: Iterable[str] | None,
+    prior: SensorParams | None,
+    record_name: str,
+    max_steps: int,
+    meta: dict[str, str],
+    alternatives: Alternatives | None,
+    workers: Workers,
+) -> DiscrepancyReport:
     real_time = time_is_real(meta)
     start_kind, base = parse_baseline(baseline)
     notes: list[str] = []
@@ -348,7 +376,9 @@ def run_discrepancy(
     kind = start_kind
     if start_kind == "auto":
         static_pool = tuple(e for e in pool if e in STATIC_EFFECTS)
-        first, physics_fit = _physics_steps(data, ("tunneling",), static_pool, prior, force_floor, max_steps)
+        first, physics_fit = _physics_steps(
+            data, ("tunneling",), static_pool, prior, force_floor, max_steps, workers
+        )
         choice = choose_static(physics_fit, ranking)
         kind = choice.chosen
         if kind == PHYSICS:
@@ -362,6 +392,7 @@ def run_discrepancy(
                 prior,
                 force_floor,
                 max_steps,
+                workers,
                 candidates is None,
                 physics_fit,
             )
@@ -373,7 +404,9 @@ def run_discrepancy(
                 f"({choice.sentence()})"
             )
     elif start_kind == PHYSICS:
-        steps, fit = _physics_steps(data, base, pool, prior, force_floor, max_steps, candidates is None)
+        steps, fit = _physics_steps(
+            data, base, pool, prior, force_floor, max_steps, workers, candidates is None
+        )
     if kind != PHYSICS:
         dynamic = tuple(e for e in pool if e in CURVE_EFFECTS) if candidates is not None else CURVE_EFFECTS
         dynamic = tuple(e for e in dynamic if real_time or e not in TIME_EFFECTS)
@@ -414,18 +447,21 @@ def _physics_steps(
     prior: SensorParams | None,
     force_floor: float,
     max_steps: int,
+    workers: Workers,
     creep2_follows: bool = False,
     fit: FitResult | None = None,
 ) -> tuple[list[Step], FitResult]:
     """Steps 1-4 of the module docstring from the physics ``start`` (fitted: ``fit``) with the
-    candidates ``pool``; ``creep2_follows``: creep2 becomes a candidate once creep is added."""
+    candidates ``pool``; ``creep2_follows``: creep2 becomes a candidate once creep is added. A
+    step's candidate fits are independent: ``workers`` runs them side by side."""
     current = start
     fit = fit if fit is not None else fit_channel(data, current, prior)
     steps: list[Step] = []
     remaining = list(pool)
     for _ in range(max_steps):
         findings = describe_gaps(data, fit)
-        scored = tuple(sorted((_score(data, current, e, prior) for e in remaining), key=lambda c: c.score))
+        pending = [workers.submit(_score, data, current, e, prior) for e in remaining]
+        scored = tuple(sorted((p.result() for p in pending), key=lambda c: c.score))
         decision, evidence, ambiguous = _decide(fit, data, scored, findings, force_floor)
         chosen = next((c for c in scored if c.effect == decision), None)
         # every route obeys the tracked-force rule; it is checked again where the model changes

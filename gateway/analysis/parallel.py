@@ -2,8 +2,10 @@
 
 ``Workers(jobs)`` is a context manager with ``submit(fn, *args)`` returning a
 ``concurrent.futures.Future``. With ``jobs`` > 1 the calls run in up to ``jobs - 1`` worker
-processes forked from this one (the caller keeps the last core for its own share of the work);
-with ``jobs`` = 1, or where ``fork`` is not available, each call runs at once in this process
+processes forked from this one (the caller keeps the last core for its own share of the work),
+or in ``jobs`` of them with ``spare_caller=False`` (the caller only waits: whole channels, each
+a calibration of its own, ``gateway.cli.calibrate_pool``; a discrepancy step's candidate fits).
+With ``jobs`` = 1, or where ``fork`` is not available, each call runs at once in this process
 and its future is already done. A call does the same arithmetic in either place, so a result is
 the same to the bit (``tests/unit/gateway/analysis/test_parallel.py``). Leaving the block waits
 for every worker and ends it: nothing outlives a calibration.
@@ -38,10 +40,11 @@ def default_jobs() -> int:
 class Workers:
     """Calls handed to forked worker processes (module docstring)."""
 
-    def __init__(self, jobs: int | None = None) -> None:
+    def __init__(self, jobs: int | None = None, spare_caller: bool = True) -> None:
         self.jobs = default_jobs() if jobs is None else int(jobs)
         if self.jobs < 1:
             raise ValueError(f"jobs = {jobs!r} must be at least 1")
+        self.spare_caller = spare_caller
         self._executor: Executor | None = None
 
     @property
@@ -69,6 +72,7 @@ class Workers:
             return done
         if self._executor is None:
             self._executor = ProcessPoolExecutor(
-                max_workers=self.jobs - 1, mp_context=multiprocessing.get_context("fork")
+                max_workers=self.jobs - 1 if self.spare_caller else self.jobs,
+                mp_context=multiprocessing.get_context("fork"),
             )
         return self._executor.submit(fn, *args, **kwargs)

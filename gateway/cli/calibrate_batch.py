@@ -10,7 +10,9 @@ import csv
 import glob
 import io
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -18,10 +20,12 @@ import click
 
 from ..analysis.calibration import Calibration, write_calibration
 from ..analysis.calibration_writer import written_name
-from ..analysis.records import DEFAULT_CHANNEL, read_record
+from ..analysis.channel_work import FitSettings
+from ..analysis.records import DEFAULT_CHANNEL, ChannelRecord, Record, read_record
 from ..atomic import atomic_write_text
 from ..errors import RecordError
 from ..model import ParameterError
+from .calibrate_pool import Pool, Tracker, submit_channels
 
 EXIT_ALL_OK = 0
 EXIT_SOME_FAILED = 1
@@ -104,41 +108,80 @@ def check_out_dir(out_dir: Path | None) -> Path:
 def run_batch(
     records: list[Path],
     out_dir: Path,
-    fit_channel: Callable[[Any, Path, Any], Calibration],
+    pool: Pool,
+    settings: FitSettings,
     channel_names: tuple[str, ...],
     as_name: str | None,
     model: str,
     as_json: bool,
+    tracker: Tracker,
 ) -> int:
     """Calibrate each record into ``out_dir/<record stem>.toml``, write the summary; the exit
-    status: 0 when every record was calibrated, 1 when any failed."""
-    rows: list[dict[str, Any]] = []
-    for rec in records:
-        target = out_dir / f"{rec.stem}.toml"
-        try:
-            results = _calibrate_one(rec, target, fit_channel, channel_names, as_name, model)
-        except (RecordError, ParameterError, ValueError, OSError) as exc:
-            message = " ".join(str(exc).split()) or type(exc).__name__
-            if isinstance(exc, OSError):
-                message = f"cannot read or write: {exc.strerror or exc}"
-            rows.append({"record": str(rec), "status": "failed", "error": message})
-            if not as_json:
-                click.echo(f"{rec}: failed: {message}", err=True)
-            continue
-        for cal in results:
-            rows.append(_row(rec, target, cal, model, as_name))
+    status: 0 when every record was calibrated, 1 when any failed.
+
+    Every channel of every record is a task of ``pool`` (``calibrate_pool``): records are read
+    here one after another while the pool works, at most about two tasks a worker ahead (a
+    thousand records are never all in memory), and each record is written as soon as its last
+    channel is done."""
+    rows: dict[int, list[dict[str, Any]]] = {}
+    waiting: list[_Pending] = []
+
+    def fail(k: int, rec: Path, exc: BaseException) -> None:
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        if isinstance(exc, OSError):
+            message = f"cannot read or write: {exc.strerror or exc}"
+        rows[k] = [{"record": str(rec), "status": "failed", "error": message}]
+        tracker.record_done(str(rec), ok=False)
         if not as_json:
-            click.echo(f"{rec}: ok, wrote {target}", err=True)
-    failed = sum(1 for r in rows if r["status"] == "failed")
+            click.echo(f"{rec}: failed: {message}", err=True)
+
+    def finish(work: _Pending) -> None:
+        try:
+            results = [f.result() for f in work.futures]
+            write_calibration(work.target, results, model, work.rename)
+        except Exception as exc:  # a channel's fit or the file: this record fails, the others go on
+            fail(work.index, work.path, exc)
+            return
+        rows[work.index] = [_row(work.path, work.target, cal, model, as_name) for cal in results]
+        tracker.record_done(str(work.path), ok=True)
+        if not as_json:
+            click.echo(f"{work.path}: ok, wrote {work.target}", err=True)
+
+    def harvest(block: bool) -> None:
+        while waiting:
+            busy = [f for w in waiting for f in w.futures if not f.done()]
+            if block and len(busy) > 2 * pool.jobs:
+                wait(busy, return_when=FIRST_COMPLETED)
+                continue
+            for work in [w for w in waiting if all(f.done() for f in w.futures)]:
+                waiting.remove(work)
+                finish(work)
+            return
+
+    for k, rec in enumerate(records):
+        try:
+            record, channels, rename = _prepare(rec, channel_names, as_name)
+        except (RecordError, ParameterError, ValueError, OSError) as exc:
+            fail(k, rec, exc)
+            continue
+        futures = submit_channels(pool, settings, channels, str(rec), record.metadata, tracker)
+        waiting.append(_Pending(k, rec, out_dir / f"{rec.stem}.toml", rename, futures))
+        harvest(block=True)
+    for work in list(waiting):
+        wait(work.futures)
+        waiting.remove(work)
+        finish(work)
+    ordered = [row for k in sorted(rows) for row in rows[k]]
+    failed = sum(1 for r in ordered if r["status"] == "failed")
     summary = {
         "records": len(records),
         "ok": len(records) - failed,
         "failed": failed,
         "out": str(out_dir),
-        "rows": rows,
+        "rows": ordered,
     }
     atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
-    atomic_write_text(out_dir / "summary.csv", _csv(rows))
+    atomic_write_text(out_dir / "summary.csv", _csv(ordered))
     if as_json:
         click.echo(json.dumps(summary))
     else:
@@ -149,14 +192,20 @@ def run_batch(
     return EXIT_SOME_FAILED if failed else EXIT_ALL_OK
 
 
-def _calibrate_one(
-    rec: Path,
-    target: Path,
-    fit_channel: Callable[[Any, Path, Any], Calibration],
-    channel_names: tuple[str, ...],
-    as_name: str | None,
-    model: str,
-) -> list[Calibration]:
+@dataclass
+class _Pending:
+    """A record whose channels are with the pool."""
+
+    index: int
+    path: Path
+    target: Path
+    rename: dict[str, str]
+    futures: list[Future[Calibration]]
+
+
+def _prepare(
+    rec: Path, channel_names: tuple[str, ...], as_name: str | None
+) -> tuple[Record, list[ChannelRecord], dict[str, str]]:
     record = read_record(rec, require_force=True)
     names = list(channel_names) or list(record.channels)
     channels = [record.channel(n) for n in names]
@@ -170,9 +219,7 @@ def _calibrate_one(
             f"the record has no channel column, so its channel is named {DEFAULT_CHANNEL!r}; give --as NAME, "
             "the device channel name to write"
         )
-    results = [fit_channel(ch, rec, record.metadata) for ch in channels]
-    write_calibration(target, results, model, rename)
-    return results
+    return record, channels, rename
 
 
 def _row(rec: Path, target: Path, cal: Calibration, model: str, as_name: str | None) -> dict[str, Any]:

@@ -19,12 +19,15 @@ from ..analysis.calibration import (
     format_report,
     write_calibration,
 )
+from ..analysis.channel_work import FitSettings
 from ..analysis.records import DEFAULT_CHANNEL, read_record
 from ..config.calibration_file import check_calibration_file
 from ..config.install import Installed, check_install_target, install_calibration
 from ..errors import ConfigError, RecordError
 from ..model import ParameterError, SensorParams, UnknownEffectError, parse_effects
 from .calibrate_batch import batch_records, check_out_dir, run_batch
+from .calibrate_pool import open_pool, submit_channels, wants_channel_pool
+from .calibrate_progress import tracker_for
 from .common import parse_assignments
 
 
@@ -124,6 +127,13 @@ from .common import parse_assignments
     help="processes a calibration may use (default: every core); the result is the same with any",
 )
 @click.option(
+    "--scheduler",
+    metavar="ADDRESS",
+    default=None,
+    help="calibrate on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786): one task per "
+    "channel, the records read here and shipped with their tasks; the result is the same as here",
+)
+@click.option(
     "--progress/--no-progress",
     default=None,
     help="show each stage of a long calibration on stderr (default: when stderr is a terminal and "
@@ -149,6 +159,7 @@ def calibrate_cmd(
     device_name: str | None,
     replace_overrides: bool,
     jobs: int | None,
+    scheduler: str | None,
     progress: bool | None,
     as_json: bool,
     overwrite: bool,
@@ -183,6 +194,7 @@ def calibrate_cmd(
             force_offset,
             as_name,
             jobs,
+            scheduler,
             progress,
             as_json,
             plot_dir,
@@ -211,6 +223,8 @@ def calibrate_cmd(
         if record_path is None:
             _install(out_path, install_path, device_name, replace_overrides, as_json, existing=True)
             return
+    if scheduler is not None and (update_path is not None or record_path is None):
+        raise click.UsageError("--scheduler goes with a calibration from records (not --update)")
     if update_path is not None:
         update_calibration(
             update_path, record_path, known, first_s, channel_names, as_name, out_path, as_json
@@ -245,9 +259,14 @@ def calibrate_cmd(
             f'config cannot use ([channel."{DEFAULT_CHANNEL}"]); give --as NAME, the device channel name '
             "to write"
         )
-    results = []
+    results: list[Calibration] = []
     show = (sys.stderr.isatty() and not as_json) if progress is None else progress
-    for k, ch in enumerate(channels, start=1):
+    settings = FitSettings(chosen, prior, OBJECTIVE_OPTIONS[objective], force_offset)
+    if wants_channel_pool(len(channels), jobs, scheduler):
+        results = _fit_in_pool(
+            settings, channels, record_path, record.metadata, jobs, scheduler, progress, as_json
+        )
+    for k, ch in enumerate([] if results else channels, start=1):
         stages = Progress(f"channel {ch.name!r} ({k}/{len(channels)})") if show else None
         try:
             results.append(
@@ -316,6 +335,7 @@ def _batch(
     force_offset: str,
     as_name: str | None,
     jobs: int | None,
+    scheduler: str | None,
     progress: bool | None,
     as_json: bool,
     plot_dir: Path | None,
@@ -338,24 +358,36 @@ def _batch(
         prior = SensorParams().with_overrides(parse_assignments(params, "--param"))
     except (UnknownEffectError, ParameterError) as exc:
         raise click.UsageError(str(exc)) from None
-    show = (sys.stderr.isatty() and not as_json) if progress is None else progress
-
-    def fit_channel(ch: Any, record_path: Path, metadata: Any) -> Calibration:
-        return calibrate(
-            ch,
-            chosen,
-            prior,
-            record_name=str(record_path),
-            metadata=metadata,
-            objective=OBJECTIVE_OPTIONS[objective],
-            force_offset=force_offset,
-            jobs=jobs,
-            progress=Progress(f"{record_path} channel {ch.name!r}") if show else None,
-        )
-
-    code = run_batch(records, out_dir, fit_channel, channel_names, as_name, model, as_json)
+    settings = FitSettings(chosen, prior, OBJECTIVE_OPTIONS[objective], force_offset)
+    tracker = tracker_for(progress, as_json)
+    with open_pool(jobs, scheduler) as pool:
+        code = run_batch(records, out_dir, pool, settings, channel_names, as_name, model, as_json, tracker)
+    tracker.close()
     if code:
         sys.exit(code)
+
+
+def _fit_in_pool(
+    settings: FitSettings,
+    channels: list[Any],
+    record_path: Path,
+    metadata: dict[str, str],
+    jobs: int | None,
+    scheduler: str | None,
+    progress: bool | None,
+    as_json: bool,
+) -> list[Calibration]:
+    """A record's channels side by side (``calibrate_pool``), in the channels' order."""
+    tracker = tracker_for(progress, as_json)
+    with open_pool(jobs, scheduler) as pool:
+        futures = submit_channels(pool, settings, channels, str(record_path), metadata, tracker)
+        try:
+            results = [f.result() for f in futures]
+        except Exception as exc:  # a fit's own refusal, or a worker lost: one line, no traceback
+            raise click.ClickException(" ".join(str(exc).split()) or type(exc).__name__) from None
+    tracker.record_done(str(record_path), ok=True)
+    tracker.close()
+    return results
 
 
 def update_calibration(

@@ -33,6 +33,13 @@ from .common import parse_assignments
 @click.option(
     "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), help="write DIR/report.md"
 )
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=None,
+    metavar="N",
+    help="processes a step's candidate fits may use (default: every core); the report is the same with any",
+)
 @click.option("--json", "as_json", is_flag=True, help="print the spec's JSON object and nothing else")
 def discrepancy_cmd(
     record_path: Path,
@@ -41,6 +48,7 @@ def discrepancy_cmd(
     candidates: str | None,
     params: tuple[str, ...],
     out_dir: Path | None,
+    jobs: int | None,
     as_json: bool,
 ) -> None:
     """Start from the sensor's best static form (or the baseline given), find where it
@@ -61,6 +69,7 @@ def discrepancy_cmd(
             prior,
             record_name=str(record_path),
             metadata=record.metadata,
+            jobs=jobs,
         )
     except ValueError as exc:
         raise click.ClickException(str(exc)) from None
