@@ -46,7 +46,7 @@ let dirty = true;
 let lastDraw = 0;
 let lastKey = "";
 // the view's settings; read from the URL at start, written back on change
-const view = { mode: "auto", max: null, unit: "N", numbers: false, same: false, threshold: null };
+const view = { mode: "auto", max: null, unit: "N", numbers: false, same: false, threshold: null, rois: [] };
 // the colours of the trend chart's lines (and of its key, style.css)
 const LINE_TOTAL = "#f5a623";
 const LINE_REFERENCE = "#6fd27a";
@@ -123,6 +123,7 @@ function readView() {
   view.same = yes(q.get("same"));
   const thr = Number.parseFloat(q.get("threshold") || "");
   view.threshold = Number.isFinite(thr) && thr > 0 ? thr : null;
+  view.rois = readRois(q);
 }
 function writeView() {
   const q = new URLSearchParams(location.search);
@@ -132,6 +133,7 @@ function writeView() {
   if (view.numbers) q.set("numbers", "1"); else q.delete("numbers");
   if (view.same) q.set("same", "1"); else q.delete("same");
   if (view.threshold !== null) q.set("threshold", String(view.threshold)); else q.delete("threshold");
+  writeRois(q);
   history.replaceState(null, "", `${location.pathname}?${q}${location.hash}`);
 }
 function showControls() {
@@ -338,6 +340,7 @@ function drawMap(canvas, d, opts) {
   });
   canvas.dataset.numbers = String(numbers);
   if (geo.regions && opts.outlines) drawRegionBoxes(ctx, d, tr);
+  if (opts.main) drawRois(ctx, d, tr);
   if (f && opts.trail) drawTrail(ctx, d, tr, f);
 }
 
@@ -584,6 +587,7 @@ function render() {
       placeRegions(d, $("map"), 12);
       placeAxes(d, $("map"), 12);
       updateSums(d);
+      updateRois(d);
       updateStatusWords(d.frame);
       drawHistory($("history"), d);
       updateText(d, now);
@@ -757,6 +761,7 @@ function main() {
   $("map").addEventListener("mousemove", hover);
   $("map").addEventListener("mouseleave", () => { $("tooltip").hidden = true; });
   $("smooth").addEventListener("change", () => { dirty = true; });
+  startTools();
   readView();
   showControls();
   const changed = () => { writeView(); showControls(); lastKey = ""; dirty = true; };
