@@ -63,16 +63,27 @@ demo: $(STAMP)
 	$(VENV)/bin/tactile-gateway demo
 
 # The docs' screenshots of the page, made by the tests that check what they show (headless
-# chromium through Playwright): the live page at the demo's forces, the playback of a record and
-# the hand profile drawn by regions.
+# chromium through Playwright): the live page at the demo's forces, the playback of a record,
+# the hand profile drawn by regions, and the page as a measuring tool (issue 35: the array and
+# its axes, a phone, one scale, a threshold, a region of interest, the history, a difference).
 screenshots: $(STAMP) sysdeps
 	TACTILE_SCREENSHOT_DEMO=$(CURDIR)/docs/screenshot-pressure-map.png \
 	TACTILE_SCREENSHOT_PLAYBACK=$(CURDIR)/docs/screenshot-playback.png \
 	TACTILE_SCREENSHOT_HAND=$(CURDIR)/docs/screenshot-hand.png \
+	TACTILE_SCREENSHOT_ARRAY=$(CURDIR)/docs/screenshot-array.png \
+	TACTILE_SCREENSHOT_PHONE=$(CURDIR)/docs/screenshot-phone.png \
+	TACTILE_SCREENSHOT_OVERVIEW=$(CURDIR)/docs/screenshot-overview.png \
+	TACTILE_SCREENSHOT_THRESHOLD=$(CURDIR)/docs/screenshot-threshold.png \
+	TACTILE_SCREENSHOT_ROI=$(CURDIR)/docs/screenshot-roi.png \
+	TACTILE_SCREENSHOT_HISTORY=$(CURDIR)/docs/screenshot-history.png \
+	TACTILE_SCREENSHOT_DIFFERENCE=$(CURDIR)/docs/screenshot-difference.png \
 	$(PY) -m pytest -q \
 		tests/integration/test_web_page.py::test_auto_range_makes_the_peak_bright_at_demo_forces \
 		tests/integration/test_web_playback.py::test_playback_moves_through_the_record \
-		tests/integration/test_web_hand.py::test_the_page_draws_the_hand_by_regions_with_sums
+		tests/integration/test_web_hand.py::test_the_page_draws_the_hand_by_regions_with_sums \
+		tests/integration/test_web_page_tool.py \
+		tests/integration/test_web_page_time.py \
+		tests/integration/test_web_page_roi.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache *.egg-info

@@ -129,6 +129,8 @@ function drawHistory(canvas, d) {
   // the key under the chart names each line drawn
   $("key-reference").hidden = !hasRef;
   for (const el of document.querySelectorAll(".chart-unit")) el.textContent = u;
+  $("key-total-words").textContent = view.unit === "N" ? "total force (N, left axis)"
+    : `mean pressure over the contact area (${u}, left axis)`;
   canvas.dataset.reference = hasRef ? "1" : "0";
   canvas.dataset.points = String(hist.length);
   canvas.dataset.source = playback ? "playback" : d.historySource || "";
