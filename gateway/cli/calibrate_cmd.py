@@ -136,8 +136,8 @@ from .common import parse_assignments
 @click.option(
     "--progress/--no-progress",
     default=None,
-    help="show each stage of a long calibration on stderr (default: when stderr is a terminal and "
-    "without --json)",
+    help="progress on stderr: several channels or records: a bar on a terminal, else (or with --json) a "
+    "line per channel done, unless --no-progress; one channel: its stages, by default on a terminal only",
 )
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object and nothing else")
 @click.option("--force", "overwrite", is_flag=True, help="replace --out even if it is not a calibration file")
@@ -359,7 +359,7 @@ def _batch(
     except (UnknownEffectError, ParameterError) as exc:
         raise click.UsageError(str(exc)) from None
     settings = FitSettings(chosen, prior, OBJECTIVE_OPTIONS[objective], force_offset)
-    tracker = tracker_for(progress, as_json)
+    tracker = tracker_for(progress, as_json, len(records))
     with open_pool(jobs, scheduler) as pool:
         code = run_batch(records, out_dir, pool, settings, channel_names, as_name, model, as_json, tracker)
     tracker.close()
