@@ -153,6 +153,8 @@ async def test_the_map_is_legible_at_phone_width(browser: Any, tmp_path: Path) -
         k = box["width"] / 480
         await page.mouse.move(box["x"] + px * k, box["y"] + py * k)
         assert (await text(page, "#tooltip")).startswith("ch05 (2.5, 2.5 mm): 1.000 N")
+        width = await page.evaluate("() => document.documentElement.scrollWidth")
+        assert width <= 375, f"the tooltip widens the page to {width} px"
         shot = tmp_path / "phone.png"
         await page.screenshot(path=str(shot), full_page=True)
         shot_to("TACTILE_SCREENSHOT_PHONE", shot)

@@ -344,131 +344,7 @@ function drawMap(canvas, d, opts) {
   if (f && opts.trail) drawTrail(ctx, d, tr, f);
 }
 
-function drawDisabled(ctx, x, y, side) {
-  ctx.fillStyle = DISABLED_FILL;
-  ctx.fillRect(x, y, side, side);
-  ctx.save();
-  ctx.strokeStyle = DISABLED_CROSS;
-  ctx.lineWidth = Math.max(2, side / 16);
-  const m = side * 0.18;
-  ctx.beginPath();
-  ctx.moveTo(x + m, y + m); ctx.lineTo(x + side - m, y + side - m);
-  ctx.moveTo(x + side - m, y + m); ctx.lineTo(x + m, y + side - m);
-  ctx.stroke();
-  ctx.strokeRect(x + 1, y + 1, side - 2, side - 2);
-  ctx.restore();
-  if (side > 26) {
-    ctx.fillStyle = "#c8ced6";
-    ctx.font = `${Math.max(9, Math.min(14, side / 5))}px sans-serif`;
-    ctx.textAlign = "center";
-    ctx.textBaseline = "middle";
-    ctx.fillText("OFF", x + side / 2, y + side / 2);
-  }
-}
-
-function hatch(ctx, x, y, side, a, b) {
-  ctx.fillStyle = b;
-  ctx.fillRect(x, y, side, side);
-  ctx.save();
-  ctx.beginPath();
-  ctx.rect(x, y, side, side);
-  ctx.clip();
-  ctx.strokeStyle = a;
-  ctx.lineWidth = Math.max(2, side / 14);
-  for (let k = -side; k < side; k += side / 5) {
-    ctx.beginPath();
-    ctx.moveTo(x + k, y + side);
-    ctx.lineTo(x + k + side, y);
-    ctx.stroke();
-  }
-  ctx.restore();
-}
-
-function drawSmooth(ctx, d, tr, max) {
-  // a Gaussian-weighted interpolation of the valued channels on a coarse grid, scaled up
-  const f = d.frame;
-  const n = 96;
-  const img = ctx.createImageData(n, n);
-  const geo = d.geo;
-  const sigma2 = 2 * (0.6 * geo.pitch) ** 2;
-  const pts = [];
-  d.layout.channels.forEach((c, k) => {
-    const s = f.status[k];
-    if (VALUED.has(s)) pts.push([c.x_mm, c.y_mm, shownValue(d, f, k) || 0]);
-  });
-  for (let j = 0; j < n; j++) {
-    const ym = geo.y0 + ((j + 0.5) / n) * (geo.y1 - geo.y0);
-    for (let i = 0; i < n; i++) {
-      const xm = geo.x0 + ((i + 0.5) / n) * (geo.x1 - geo.x0);
-      let sw = 0;
-      let sv = 0;
-      for (const [px, py, v] of pts) {
-        const wgt = Math.exp(-((xm - px) ** 2 + (ym - py) ** 2) / sigma2);
-        sw += wgt;
-        sv += wgt * v;
-      }
-      const c = colour(sw > 1e-6 ? sv / sw : 0, max);
-      const o = 4 * (j * n + i);
-      img.data[o] = c[0]; img.data[o + 1] = c[1]; img.data[o + 2] = c[2]; img.data[o + 3] = 255;
-    }
-  }
-  const off = document.createElement("canvas");
-  off.width = n;
-  off.height = n;
-  off.getContext("2d").putImageData(img, 0, 0);
-  ctx.imageSmoothingEnabled = true;
-  ctx.drawImage(off, tr.px(geo.x0), tr.py(geo.y0), tr.s * (geo.x1 - geo.x0), tr.s * (geo.y1 - geo.y0));
-}
-
-function drawTrail(ctx, d, tr, f) {
-  const pts = d.trail;
-  ctx.lineWidth = 2;
-  for (let i = 1; i < pts.length; i++) {
-    const age = (f.t - pts[i][0]) / TRAIL_S;
-    ctx.strokeStyle = `rgba(95,179,255,${Math.max(0.1, 1 - age)})`;
-    ctx.beginPath();
-    ctx.moveTo(tr.px(pts[i - 1][1]), tr.py(pts[i - 1][2]));
-    ctx.lineTo(tr.px(pts[i][1]), tr.py(pts[i][2]));
-    ctx.stroke();
-  }
-  if (f.cop_mm) {
-    const x = tr.px(f.cop_mm[0]);
-    const y = tr.py(f.cop_mm[1]);
-    ctx.strokeStyle = "#5fb3ff";
-    ctx.fillStyle = "#fff";
-    ctx.lineWidth = 3;
-    ctx.beginPath();
-    ctx.arc(x, y, 8, 0, 2 * Math.PI);
-    ctx.fill();
-    ctx.stroke();
-  }
-}
-
-function drawScale(canvas, max, title) {
-  const ctx = canvas.getContext("2d");
-  const w = canvas.width;
-  const h = canvas.height;
-  ctx.clearRect(0, 0, w, h);
-  const top = 24;
-  const bottom = h - 12;
-  for (let y = top; y <= bottom; y++) {
-    ctx.fillStyle = rgb(colour(((bottom - y) / (bottom - top)) * max, max));
-    ctx.fillRect(8, y, 22, 1);
-  }
-  ctx.fillStyle = "#e6e9ee";
-  ctx.font = "12px sans-serif";
-  ctx.textAlign = "left";
-  ctx.textBaseline = "middle";
-  ctx.fillText(title, 4, 10);
-  for (let k = 0; k <= 5; k++) {
-    const y = bottom - (k / 5) * (bottom - top);
-    ctx.fillRect(30, y, 5, 1);
-    const v = (k / 5) * max;
-    ctx.fillText(v.toFixed(max >= 50 ? 0 : max >= 5 ? 1 : max >= 0.5 ? 2 : 3), 38, y);
-  }
-}
-
-// (drawHistory, the trend chart: timeline.js)
+// (drawDisabled, hatch, drawSmooth, drawTrail, drawScale: view.js)
 
 function updateText(d, now) {
   const f = d.frame;
@@ -619,101 +495,7 @@ function drawSignedKey(d) {
   $("map").dataset.max = String(smax);
 }
 
-// ---------------------------------------------------------------- playback
-// the index of the last frame at or before time t (s, the record's clock), or 0
-function frameAt(t) {
-  const fr = playback.frames;
-  let lo = 0;
-  let hi = fr.length - 1;
-  while (lo < hi) {
-    const mid = (lo + hi + 1) >> 1;
-    if (fr[mid].t <= t) lo = mid; else hi = mid - 1;
-  }
-  return lo;
-}
-
-// show the record at time t: the frame then, the trend and trail up to it
-function seek(t) {
-  const pb = playback;
-  pb.t = Math.max(pb.start, Math.min(pb.end, t));
-  $("time").value = String(pb.t);
-  $("time").dataset.t = String(pb.t);
-  $("time-readout").textContent = `${(pb.t - pb.start).toFixed(2)} s of ${(pb.end - pb.start).toFixed(2)} s`;
-  const k = frameAt(pb.t);
-  if (k === pb.shown) return;
-  pb.shown = k;
-  const d = devices.get(pb.device);
-  if (!d) return;
-  const f = pb.frames[k];
-  d.frame = f;
-  d.arrived = performance.now();
-  d.history = [];
-  d.trail = [];
-  for (let i = k; i >= 0 && pb.frames[i].t >= f.t - HISTORY_S; i--) {
-    const g = pb.frames[i];
-    d.history.unshift(histPoint(g));
-    if (g.t >= f.t - TRAIL_S && g.cop_mm) d.trail.unshift([g.t, g.cop_mm[0], g.cop_mm[1]]);
-  }
-  updateAuto(d, performance.now());
-  $("map").dataset.frame = String(f.seq);
-  dirty = true;
-}
-
-function setPlaying(on) {
-  const pb = playback;
-  if (on && pb.t >= pb.end) seek(pb.start); // play at the end starts again
-  pb.playing = on;
-  pb.tick = null;
-  $("play").disabled = on;
-  $("pause").disabled = !on;
-  $("playback").dataset.playing = on ? "1" : "0";
-}
-
-function tickPlayback(now) {
-  const pb = playback;
-  if (!pb.playing) return;
-  if (pb.tick !== null) {
-    seek(pb.t + ((now - pb.tick) / 1000) * pb.speed);
-    if (pb.t >= pb.end) {
-      if (loopAtEnd()) pb.tick = now; else setPlaying(false);
-      return;
-    }
-  }
-  pb.tick = now;
-}
-
-async function startPlayback(info) {
-  const resp = await fetch("/api/playback", { cache: "no-store" });
-  if (!resp.ok) throw new Error(`/api/playback: ${resp.status}`);
-  const data = await resp.json();
-  playback = {
-    device: data.device, frames: data.frames, start: data.start_s, end: data.end_s,
-    t: data.start_s, shown: -1, playing: false, tick: null, speed: 1,
-  };
-  $("playback").hidden = false;
-  $("conn").textContent = `playback: ${info.source || "record"}`;
-  $("conn").className = "conn live";
-  const slider = $("time");
-  slider.min = String(data.start_s);
-  slider.max = String(data.end_s);
-  slider.addEventListener("input", () => seek(Number.parseFloat(slider.value)));
-  $("play").addEventListener("click", () => setPlaying(true));
-  $("pause").addEventListener("click", () => setPlaying(false));
-  $("speed").addEventListener("change", () => {
-    playback.speed = Number.parseFloat($("speed").value) || 1;
-    playback.tick = null;
-  });
-  const q = new URLSearchParams(location.search);
-  const speed = q.get("speed");
-  if (speed && [...$("speed").options].some((o) => o.value === speed)) {
-    $("speed").value = speed;
-    playback.speed = Number.parseFloat(speed);
-  }
-  seek(data.start_s);
-  setPlaying(false);
-  startPlaybackTools();
-  document.body.dataset.playback = "ready";
-}
+// (playback: frameAt, seek, setPlaying, tickPlayback, startPlayback: timeline.js)
 
 function hover(ev) {
   const tip = $("tooltip");
@@ -746,9 +528,11 @@ function hover(ev) {
   const signed = playback && signedMode() && mapMode.mode === "diff" ? signedValues()[best] : null;
   const diff = signed === null ? "" : `, B − A ${signed >= 0 ? "+" : ""}${fmtU(signed)} ${unitLabel()}`;
   tip.textContent = `${c.name} (${c.x_mm}, ${c.y_mm} mm): ${value}, ${status}${against}${diff}`;
-  tip.style.left = `${ev.clientX - rect.left + 14}px`;
-  tip.style.top = `${ev.clientY - rect.top + 14}px`;
   tip.hidden = false;
+  // beside the pointer, on its left where the right would leave the map (a phone's edge)
+  const x = ev.clientX - rect.left;
+  tip.style.left = `${x + 14 + tip.offsetWidth > rect.width ? Math.max(0, x - 14 - tip.offsetWidth) : x + 14}px`;
+  tip.style.top = `${ev.clientY - rect.top + 14}px`;
 }
 
 function main() {

@@ -297,3 +297,99 @@ function loopAtEnd() {
   seek(playback.start);
   return true;
 }
+
+// ---------------------------------------------------------------- playback
+// the index of the last frame at or before time t (s, the record's clock), or 0
+function frameAt(t) {
+  const fr = playback.frames;
+  let lo = 0;
+  let hi = fr.length - 1;
+  while (lo < hi) {
+    const mid = (lo + hi + 1) >> 1;
+    if (fr[mid].t <= t) lo = mid; else hi = mid - 1;
+  }
+  return lo;
+}
+
+// show the record at time t: the frame then, the trend and trail up to it
+function seek(t) {
+  const pb = playback;
+  pb.t = Math.max(pb.start, Math.min(pb.end, t));
+  $("time").value = String(pb.t);
+  $("time").dataset.t = String(pb.t);
+  $("time-readout").textContent = `${(pb.t - pb.start).toFixed(2)} s of ${(pb.end - pb.start).toFixed(2)} s`;
+  const k = frameAt(pb.t);
+  if (k === pb.shown) return;
+  pb.shown = k;
+  const d = devices.get(pb.device);
+  if (!d) return;
+  const f = pb.frames[k];
+  d.frame = f;
+  d.arrived = performance.now();
+  d.history = [];
+  d.trail = [];
+  for (let i = k; i >= 0 && pb.frames[i].t >= f.t - HISTORY_S; i--) {
+    const g = pb.frames[i];
+    d.history.unshift(histPoint(g));
+    if (g.t >= f.t - TRAIL_S && g.cop_mm) d.trail.unshift([g.t, g.cop_mm[0], g.cop_mm[1]]);
+  }
+  updateAuto(d, performance.now());
+  $("map").dataset.frame = String(f.seq);
+  dirty = true;
+}
+
+function setPlaying(on) {
+  const pb = playback;
+  if (on && pb.t >= pb.end) seek(pb.start); // play at the end starts again
+  pb.playing = on;
+  pb.tick = null;
+  $("play").disabled = on;
+  $("pause").disabled = !on;
+  $("playback").dataset.playing = on ? "1" : "0";
+}
+
+function tickPlayback(now) {
+  const pb = playback;
+  if (!pb.playing) return;
+  if (pb.tick !== null) {
+    seek(pb.t + ((now - pb.tick) / 1000) * pb.speed);
+    if (pb.t >= pb.end) {
+      if (loopAtEnd()) pb.tick = now; else setPlaying(false);
+      return;
+    }
+  }
+  pb.tick = now;
+}
+
+async function startPlayback(info) {
+  const resp = await fetch("/api/playback", { cache: "no-store" });
+  if (!resp.ok) throw new Error(`/api/playback: ${resp.status}`);
+  const data = await resp.json();
+  playback = {
+    device: data.device, frames: data.frames, start: data.start_s, end: data.end_s,
+    t: data.start_s, shown: -1, playing: false, tick: null, speed: 1,
+  };
+  $("playback").hidden = false;
+  $("conn").textContent = `playback: ${info.source || "record"}`;
+  $("conn").className = "conn live";
+  const slider = $("time");
+  slider.min = String(data.start_s);
+  slider.max = String(data.end_s);
+  slider.addEventListener("input", () => seek(Number.parseFloat(slider.value)));
+  $("play").addEventListener("click", () => setPlaying(true));
+  $("pause").addEventListener("click", () => setPlaying(false));
+  $("speed").addEventListener("change", () => {
+    playback.speed = Number.parseFloat($("speed").value) || 1;
+    playback.tick = null;
+  });
+  const q = new URLSearchParams(location.search);
+  const speed = q.get("speed");
+  if (speed && [...$("speed").options].some((o) => o.value === speed)) {
+    $("speed").value = speed;
+    playback.speed = Number.parseFloat(speed);
+  }
+  seek(data.start_s);
+  setPlaying(false);
+  startPlaybackTools();
+  document.body.dataset.playback = "ready";
+}

@@ -225,3 +225,128 @@ function markThreshold(canvas, max) {
   ctx.fillStyle = "#5fb3ff";
   ctx.fillRect(2, y - 1, 34, 2);
 }
+
+// ---------------------------------------------------------------- drawing helpers of the map and key
+function drawDisabled(ctx, x, y, side) {
+  ctx.fillStyle = DISABLED_FILL;
+  ctx.fillRect(x, y, side, side);
+  ctx.save();
+  ctx.strokeStyle = DISABLED_CROSS;
+  ctx.lineWidth = Math.max(2, side / 16);
+  const m = side * 0.18;
+  ctx.beginPath();
+  ctx.moveTo(x + m, y + m); ctx.lineTo(x + side - m, y + side - m);
+  ctx.moveTo(x + side - m, y + m); ctx.lineTo(x + m, y + side - m);
+  ctx.stroke();
+  ctx.strokeRect(x + 1, y + 1, side - 2, side - 2);
+  ctx.restore();
+  if (side > 26) {
+    ctx.fillStyle = "#c8ced6";
+    ctx.font = `${Math.max(9, Math.min(14, side / 5))}px sans-serif`;
+    ctx.textAlign = "center";
+    ctx.textBaseline = "middle";
+    ctx.fillText("OFF", x + side / 2, y + side / 2);
+  }
+}
+
+function hatch(ctx, x, y, side, a, b) {
+  ctx.fillStyle = b;
+  ctx.fillRect(x, y, side, side);
+  ctx.save();
+  ctx.beginPath();
+  ctx.rect(x, y, side, side);
+  ctx.clip();
+  ctx.strokeStyle = a;
+  ctx.lineWidth = Math.max(2, side / 14);
+  for (let k = -side; k < side; k += side / 5) {
+    ctx.beginPath();
+    ctx.moveTo(x + k, y + side);
+    ctx.lineTo(x + k + side, y);
+    ctx.stroke();
+  }
+  ctx.restore();
+}
+
+function drawSmooth(ctx, d, tr, max) {
+  // a Gaussian-weighted interpolation of the valued channels on a coarse grid, scaled up
+  const f = d.frame;
+  const n = 96;
+  const img = ctx.createImageData(n, n);
+  const geo = d.geo;
+  const sigma2 = 2 * (0.6 * geo.pitch) ** 2;
+  const pts = [];
+  d.layout.channels.forEach((c, k) => {
+    const s = f.status[k];
+    if (VALUED.has(s)) pts.push([c.x_mm, c.y_mm, shownValue(d, f, k) || 0]);
+  });
+  for (let j = 0; j < n; j++) {
+    const ym = geo.y0 + ((j + 0.5) / n) * (geo.y1 - geo.y0);
+    for (let i = 0; i < n; i++) {
+      const xm = geo.x0 + ((i + 0.5) / n) * (geo.x1 - geo.x0);
+      let sw = 0;
+      let sv = 0;
+      for (const [px, py, v] of pts) {
+        const wgt = Math.exp(-((xm - px) ** 2 + (ym - py) ** 2) / sigma2);
+        sw += wgt;
+        sv += wgt * v;
+      }
+      const c = colour(sw > 1e-6 ? sv / sw : 0, max);
+      const o = 4 * (j * n + i);
+      img.data[o] = c[0]; img.data[o + 1] = c[1]; img.data[o + 2] = c[2]; img.data[o + 3] = 255;
+    }
+  }
+  const off = document.createElement("canvas");
+  off.width = n;
+  off.height = n;
+  off.getContext("2d").putImageData(img, 0, 0);
+  ctx.imageSmoothingEnabled = true;
+  ctx.drawImage(off, tr.px(geo.x0), tr.py(geo.y0), tr.s * (geo.x1 - geo.x0), tr.s * (geo.y1 - geo.y0));
+}
+
+function drawTrail(ctx, d, tr, f) {
+  const pts = d.trail;
+  ctx.lineWidth = 2;
+  for (let i = 1; i < pts.length; i++) {
+    const age = (f.t - pts[i][0]) / TRAIL_S;
+    ctx.strokeStyle = `rgba(95,179,255,${Math.max(0.1, 1 - age)})`;
+    ctx.beginPath();
+    ctx.moveTo(tr.px(pts[i - 1][1]), tr.py(pts[i - 1][2]));
+    ctx.lineTo(tr.px(pts[i][1]), tr.py(pts[i][2]));
+    ctx.stroke();
+  }
+  if (f.cop_mm) {
+    const x = tr.px(f.cop_mm[0]);
+    const y = tr.py(f.cop_mm[1]);
+    ctx.strokeStyle = "#5fb3ff";
+    ctx.fillStyle = "#fff";
+    ctx.lineWidth = 3;
+    ctx.beginPath();
+    ctx.arc(x, y, 8, 0, 2 * Math.PI);
+    ctx.fill();
+    ctx.stroke();
+  }
+}
+
+function drawScale(canvas, max, title) {
+  const ctx = canvas.getContext("2d");
+  const w = canvas.width;
+  const h = canvas.height;
+  ctx.clearRect(0, 0, w, h);
+  const top = 24;
+  const bottom = h - 12;
+  for (let y = top; y <= bottom; y++) {
+    ctx.fillStyle = rgb(colour(((bottom - y) / (bottom - top)) * max, max));
+    ctx.fillRect(8, y, 22, 1);
+  }
+  ctx.fillStyle = "#e6e9ee";
+  ctx.font = "12px sans-serif";
+  ctx.textAlign = "left";
+  ctx.textBaseline = "middle";
+  ctx.fillText(title, 4, 10);
+  for (let k = 0; k <= 5; k++) {
+    const y = bottom - (k / 5) * (bottom - top);
+    ctx.fillRect(30, y, 5, 1);
+    const v = (k / 5) * max;
+    ctx.fillText(v.toFixed(max >= 50 ? 0 : max >= 5 ? 1 : max >= 0.5 ? 2 : 3), 38, y);
+  }
+}
