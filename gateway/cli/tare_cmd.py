@@ -27,6 +27,7 @@ from ..analysis.tare_window import WindowTare, compute_window_tare
 from ..config import DeviceConfig, Encoding, load_config
 from ..config.editor import find_devices, read_config_text, set_device_array
 from ..config.readout import NO_BASELINE
+from ..config.rois import select_channels
 from ..errors import ConfigError, DeviceError, RecordError
 from ..runtime.sampler import sample_device
 from .action_cmd import one_device, run_device_action
@@ -39,42 +40,10 @@ def _fail(message: str, code: int = 2) -> NoReturn:
 
 
 def parse_channels(spec: str, device: DeviceConfig) -> list[int]:
-    """``ch00,ch05,0-11`` -> channel indices (ascending): names, indices 0..N-1 and ranges
-    ``A-B`` of indices, and on a device made of regions a region's name (``palm``) or a group's
-    (``index``: each of its regions); ``ValueError`` naming the entry that is none of them."""
-    names = {ch.name: ch.index for ch in device.channels}
-    spans: dict[str, list[int]] = {}
-    for region in device.regions:
-        taxels = range(region.first_channel, region.first_channel + region.n_channels)
-        spans.setdefault(region.name, []).extend(taxels)
-        if region.group and region.group != region.name:
-            spans.setdefault(region.group, []).extend(taxels)
-    last = device.n_channels - 1
-    regions = " or region and group names (e.g. palm)" if device.regions else ""
-    allowed = (
-        f"allowed: channel names (e.g. {device.channels[0].name}), indices 0-{last} or ranges A-B{regions}"
-    )
-    out: set[int] = set()
-    for raw in spec.split(","):
-        entry = raw.strip()
-        if not entry:
-            raise ValueError(f"--channels {spec!r}: an empty entry; {allowed}")
-        if entry in names:
-            out.add(names[entry])
-            continue
-        if entry in spans:
-            out.update(spans[entry])
-            continue
-        low, dash, high = entry.partition("-")
-        try:
-            a = int(low)
-            b = int(high) if dash else a
-        except ValueError:
-            raise ValueError(f"--channels: no channel {entry!r} in device {device.name}; {allowed}") from None
-        if not 0 <= a <= b <= last:
-            raise ValueError(f"--channels: {entry!r} is out of range; {allowed}")
-        out.update(range(a, b + 1))
-    return sorted(out)
+    """``ch00,ch05,0-11`` -> channel indices (ascending): ``config.rois.select_channels`` (names,
+    indices, ranges ``A-B``, region and group names); ``ValueError`` naming a bad entry."""
+    names = [ch.name for ch in device.channels]
+    return select_channels(spec.split(","), names, device.regions, device.name, "--channels", spec)
 
 
 def record_series(

@@ -50,6 +50,7 @@ from .overrides import (
 from .profiles import load_profile, merge_profile
 from .readout import DIVIDER_KEYS, LAYOUT_KEYS, parse_baselines, parse_divider, parse_front_end, parse_layout
 from .regions import parse_regions
+from .rois import parse_rois
 from .schema import DEAD_AFTER_S, DEVICE_ID, MAX_CHANNELS, POSITION_MM, RAILS, ChannelConfig, DeviceConfig
 from .status_words import parse_status_words
 from .tables import (
@@ -104,6 +105,7 @@ DEVICE_KEYS: Final = (
     "dead_after_s",
     "status_word",
     "rails",
+    "roi",
 )
 _MODEL_KEYS: Final = ("effects", "params", DEVICE_OVERRIDE_KEY)
 _CHANNEL_KEYS: Final = ("index", "name", "x_mm", "y_mm", "enabled", "effects", "params", OVERRIDE_KEY)
@@ -439,6 +441,7 @@ def _parse_device(
             "dead_after_s", DEFAULT_DEAD_AFTER_S if regions else 0.0, DEAD_AFTER_S, " s (0: off)"
         ),
         rails=table.choice("rails", "faults", RAILS),
+        rois=parse_rois(ctx, table, name, names, regions),
     )
     check_overlaps(ctx, path, device)
     refused = [c for c in contradictions if not c.overridden]

@@ -35,6 +35,7 @@ from .layout import GridLayout
 from .limits import MAX_CHANNELS, MAX_PITCH_MM, MAX_POSITION_MM, PITCH_MM, POSITION_MM
 from .mqtt import MqttConfig
 from .regions import Region
+from .rois import Roi
 
 NO_CHECKS: Final = DeviceChecks()
 
@@ -253,6 +254,8 @@ class DeviceConfig:
     #: unloaded taxel reads 0 (a robot hand's raw values); a broken taxel is then found by
     #: ``dead_after_s``
     rails: str = "faults"
+    #: regions of interest (``[[bus.device.roi]]``): named channel sets summed every poll
+    rois: tuple[Roi, ...] = ()
 
     def __post_init__(self) -> None:
         where = f"device {self.name!r}"
@@ -302,6 +305,16 @@ class DeviceConfig:
             first += region.n_channels
         if self.regions and first != self.n_channels:
             raise ConfigError(f"{where}: the regions hold {first} channels for channels = {self.n_channels}")
+        roi_names: set[str] = set()
+        for roi in self.rois:
+            if roi.name in roi_names:
+                raise ConfigError(f"{where}: duplicate region of interest {roi.name!r}")
+            roi_names.add(roi.name)
+            if roi.channels[-1] >= self.n_channels:
+                raise ConfigError(
+                    f"{where}: region of interest {roi.name!r}: channel {roi.channels[-1]} is out of range; "
+                    f"allowed: 0..{self.n_channels - 1}"
+                )
 
     @property
     def columns(self) -> int:

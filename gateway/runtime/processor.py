@@ -53,6 +53,7 @@ from .baseline import BaselineCorrection
 from .clock import NO_CLOCK_HISTORY, ClockHealth, time_step
 from .converters import Converter, CurveConverter, PhysicsConverter, Step
 from .dead_taxels import NO_COUNTS, DeadState, tracker_for
+from .rois import roi_quantities, roi_slots
 from .snapshot import (
     VALUED,
     DeviceSnapshot,
@@ -243,6 +244,7 @@ class DeviceProcessor:
             if isinstance(areas, float)
             else frozen_copy(np.asarray(areas, dtype=np.float64)[self.index])
         )
+        self._rois = roi_slots(device.rois, self.index)
         # the rails are readings (``rails = "readings"``): read as with the device's bitmaps
         self._rails_read = device.rails == "readings"
 
@@ -576,6 +578,7 @@ class DeviceProcessor:
             resistance_relative=self._relative,
             dead=None if dead is None else read_only(dead),
             dead_by_region=dead_by_region,
+            rois=roi_quantities(self._rois, force, status, self.x_mm, self.y_mm, self._cell_areas_mm2),
         )
         s = tracked.state
         return snap, replace(s, last=snap, dead=dead_state)

@@ -240,6 +240,21 @@ def _in_order(idx: NDArray[np.intp]) -> bool:
 _IN_ORDER: dict[int, tuple[NDArray[np.intp], bool]] = {}
 
 
+@dataclass(frozen=True)
+class RoiQuantities:
+    """One region of interest at one poll (``runtime.rois``): its name, its enabled channels
+    (device indices), and over those in contact the sum of force (N), the peak force (N; 0
+    when none is in contact), the contact area (mm^2) and the centre of pressure (mm; None
+    when none is in contact), as ``array_quantities`` computes them over the whole array."""
+
+    name: str
+    channels: tuple[int, ...]
+    force_n: float
+    peak_n: float
+    area_mm2: float
+    cop_mm: tuple[float, float] | None
+
+
 @dataclass(frozen=True, eq=False)
 class DeviceSnapshot:
     """The converted result of the last poll of one device (immutable).
@@ -300,6 +315,8 @@ class DeviceSnapshot:
     dead_by_region: tuple[tuple[str, int], ...] = ()
     #: the device's named status words at this poll (``[[bus.device.status_word]]``), in order
     status_words: tuple[StatusWordReading, ...] = ()
+    #: the device's regions of interest at this poll (``[[bus.device.roi]]``, ``runtime.rois``)
+    rois: tuple[RoiQuantities, ...] = ()
     _static: Once[FloatArray] = field(default_factory=Once, init=False, repr=False, compare=False)
     _derived: dict[object, Once[object]] = field(default_factory=dict, init=False, repr=False, compare=False)
     _lock: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False, compare=False)
