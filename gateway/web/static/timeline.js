@@ -103,9 +103,9 @@ function drawHistory(canvas, d) {
   ctx.fillText(left, l, b2 + 12);
   ctx.fillText(right, r, b2 + 12);
   $("history-range").textContent = `${left} … ${right}`;
-  const series = (key, lo, hi, top, bottom, style, dash) => {
+  const series = (key, lo, hi, top, bottom, style, dash, width) => {
     ctx.strokeStyle = style;
-    ctx.lineWidth = 2;
+    ctx.lineWidth = width || 2;
     ctx.setLineDash(dash || []);
     ctx.beginPath();
     let pen = false;
@@ -120,8 +120,9 @@ function drawHistory(canvas, d) {
     ctx.stroke();
     ctx.setLineDash([]);
   };
-  series("total", 0, fTop, t, b, LINE_TOTAL);
-  series("peak", 0, fTop, t, b, LINE_PEAK);
+  // the total wide under the peak: with one channel loaded they are equal, and both show
+  series("total", 0, fTop, t, b, LINE_TOTAL, null, 4);
+  series("peak", 0, fTop, t, b, LINE_PEAK, null, 1.5);
   if (hasRef) series("ref", 0, fTop, t, b, LINE_REFERENCE, [6, 4]);
   series("area", 0, aMax, t, b, LINE_AREA);
   series("cx", cLo, cHi, t2, b2, LINE_COP_X);
