@@ -323,3 +323,26 @@ async def test_a_contact_threshold_set_from_the_page(browser: Any, tmp_path: Pat
         shot_to("TACTILE_SCREENSHOT_THRESHOLD", shot)
         await page.close()
     assert errors == [], errors
+
+
+async def test_the_sums_by_finger_follow_the_unit(browser: Any) -> None:
+    """On the hand in kPa, each group's and region's figure is the mean pressure over its
+    contact area: its forces in contact over (their count x 6.25 mm^2), by hand from the frame."""
+    from test_web_hand import hand_page
+
+    async with hand_page() as (server, dev, snap):
+        page, errors = await open_page(browser, server.base_url + "/?unit=kPa", width=1400, height=1000)
+        await until_async(
+            lambda: _is(page, "#sums-title", "Mean pressure by finger and region (kPa)"), 5, "kPa"
+        )
+        groups: dict[str, list[float]] = {}
+        for region in dev.regions:
+            groups.setdefault(region.group, []).extend(float(v) for v in snap.force_n[region.channel_slice])
+        for group, forces in groups.items():
+            loaded = [f for f in forces if f > 0]
+            want = "–" if not loaded else f"{sum(loaded) / (len(loaded) * CELL_AREA_MM2) * 1000:.1f}"
+            got = await text(page, f'#sums-body tr[data-group="{group}"] .sum')
+            assert got == want, (group, got, want)
+        assert groups["palm"] and groups["little"]  # one loaded group and one idle one
+        await page.close()
+    assert errors == [], errors

@@ -173,20 +173,44 @@ function updateStatusWords(f) {
   }));
 }
 
+// the frame slots of a region's channels (the disabled left out: never polled)
+function regionSlots(d, r) {
+  const out = [];
+  for (let i = 0; i < r.n_channels; i++) {
+    const k = d.geo.frameSlot.get(r.first_channel + i);
+    if (k !== undefined) out.push(k);
+  }
+  return out;
+}
+
+// the sums in N (data-n keeps the force); in a pressure unit each group's and region's figure
+// is the mean pressure over its contact area (its forces in contact over their cells' area)
 function updateSums(d) {
   const f = d.frame;
   if (!f || !(d.layout.groups || []).length) return;
+  const pressure = view.unit !== "N";
+  $("sums-title").textContent = pressure ? `Mean pressure by finger and region (${view.unit})`
+    : "Force by finger and region (N)";
   const byRegion = new Map(d.layout.regions.map((r) => [r.name, regionSum(d, r, f)]));
+  const slots = new Map(d.layout.regions.map((r) => [r.name, regionSlots(d, r)]));
   for (const row of $("sums-body").children) {
     let sum;
+    let names;
     if (row.dataset.group !== undefined) {
       const g = d.layout.groups.find((x) => x.name === row.dataset.group);
+      names = g ? g.regions : [];
       sum = g ? g.regions.reduce((a, name) => a + (byRegion.get(name) || 0), 0) : null;
     } else {
+      names = [row.dataset.region];
       sum = byRegion.get(row.dataset.region);
     }
     const cell = row.querySelector(".sum");
-    cell.textContent = fmt(sum, 3);
+    if (pressure) {
+      const st = frameStats(d, f, names.flatMap((name) => slots.get(name) || []));
+      cell.textContent = fmtU(totalInUnit(st.total_n, st.area_mm2));
+    } else {
+      cell.textContent = fmt(sum, 3);
+    }
     cell.dataset.n = sum === null || sum === undefined ? "" : String(sum);
   }
 }
