@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import json
 import os
 import shutil
 import time
@@ -344,5 +345,50 @@ async def test_the_sums_by_finger_follow_the_unit(browser: Any) -> None:
             got = await text(page, f'#sums-body tr[data-group="{group}"] .sum')
             assert got == want, (group, got, want)
         assert groups["palm"] and groups["little"]  # one loaded group and one idle one
+        await page.close()
+    assert errors == [], errors
+
+
+async def test_pressure_on_a_device_of_regions_uses_each_regions_cell(browser: Any) -> None:
+    """A hand whose palm is described with a 5 mm pitch (25 mm^2 cells; the layout served here by
+    the test): in kPa a palm cell reads its force over 25 mm^2 (in the tooltip and the peak),
+    a fingertip cell over 6.25 mm^2."""
+    from test_web_hand import hand_page, map_px
+
+    async with hand_page() as (server, dev, snap):
+        page = await browser.new_page(viewport={"width": 1400, "height": 1000})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+
+        async def devices(route: Any) -> None:
+            resp = await route.fetch()
+            data = await resp.json()
+            for region in data["devices"][0]["regions"]:
+                if region["name"] == "palm":
+                    region["pitch_mm"] = [5.0, 5.0]
+            await route.fulfill(response=resp, body=json.dumps(data))
+
+        await page.route("**/api/devices", devices)
+        await page.goto(server.base_url + "/?unit=kPa")
+        await until_async(lambda: _is(page, "#state", "up"), 10, "the hand shown as up")
+        # the peak is the palm's centre cell: over 25 mm^2
+        peak_k = int(np.argmax(snap.force_n))
+        assert snap.channel_names[peak_k].startswith("palm")
+        want = float(snap.force_n[peak_k]) * 1000 / 25.0
+        name, value, unit = (await text(page, "#peak")).split()
+        assert name == snap.channel_names[peak_k] and unit == "kPa"
+        assert float(value) == pytest.approx(want, abs=0.05)
+        # the index fingertip's centre cell: over 6.25 mm^2
+        tip = next(r for r in dev.regions if r.name == "index-tip")
+        cx, cy = tip.position_mm(4)
+        px, py, _, _ = map_px((cx, cy, cx, cy))
+        box = await page.locator("#map").bounding_box()
+        await page.mouse.move(box["x"] + px, box["y"] + py)
+        tip_text = await text(page, "#tooltip")
+        k = next(i for i, c in enumerate(dev.channels) if c.x_mm == cx and c.y_mm == cy)
+        force = float(snap.force_n[k])
+        assert tip_text.startswith(f"{dev.channels[k].name} ") and f"{force:.3f} N, " in tip_text, tip_text
+        kpa = float(tip_text.split(" N, ")[1].split(" kPa")[0])
+        assert kpa == pytest.approx(force * 1000 / CELL_AREA_MM2, abs=0.05), tip_text
         await page.close()
     assert errors == [], errors

@@ -88,7 +88,7 @@ function defaultMax(d) { return toUnit(d, d.layout.scale_n[1]) || d.layout.scale
 function framePeak(d, f) {
   let peak = 0;
   f.status.forEach((s, k) => {
-    const v = VALUED.has(s) ? toUnit(d, f.force_n[k]) : null;
+    const v = VALUED.has(s) ? toUnit(d, f.force_n[k], k) : null;
     if (v !== null && v > peak) peak = v;
   });
   return peak;
@@ -211,7 +211,7 @@ function onFrame(f) {
   d.frame = f;
   d.arrived = now;
   if (f.t !== null) {
-    d.history.push(histPoint(f));
+    d.history.push(histPoint(f, d));
     while (d.history.length && d.history[0].t < f.t - HISTORY_S) d.history.shift();
     if (f.cop_mm) d.trail.push([f.t, f.cop_mm[0], f.cop_mm[1]]);
     while (d.trail.length && d.trail[0][0] < f.t - TRAIL_S) d.trail.shift();
@@ -362,7 +362,7 @@ function updateText(d, now) {
   $("cop-y").textContent = st2.cop ? fmt(st2.cop[1], 2) : "–";
   $("area").textContent = fmt(st2.area_mm2, 2);
   $("in-contact").textContent = String(st2.in_contact);
-  $("peak").textContent = st2.peak ? `${st2.peak} ${fmtU(toUnit(d, st2.peak_n))} ${unitLabel()}` : "–";
+  $("peak").textContent = st2.peak ? `${st2.peak} ${fmtU(toUnit(d, st2.peak_n, st2.peak_k))} ${unitLabel()}` : "–";
   $("health-up").textContent = f.up ? "up" : `not answering${f.error ? ": " + f.error : ""}`;
   $("health-up").title = $("health-up").textContent;
   const p = d.polls;
@@ -519,7 +519,7 @@ function hover(ev) {
   const f = d.frame;
   const status = d.layout.status_labels[f.status[best]] || "?";
   const force = f.force_n[best];
-  const p = view.unit === "N" ? null : toUnit(d, force);
+  const p = view.unit === "N" ? null : toUnit(d, force, best);
   const value = force === null ? "no value"
     : `${force.toFixed(3)} N${p !== null ? `, ${p.toFixed(1)} ${view.unit}` : ""}`;
   const ref = f.reference_force_n ? f.reference_force_n[best] : null;

@@ -10,14 +10,19 @@
 function regionGeometry(layout) {
   const boxes = layout.regions.map((r) => r.box_mm);
   const sideByIndex = new Map();
+  const areaByIndex = new Map(); // a cell's area (mm^2): its region's pitch along x times along y
   for (const r of layout.regions) {
     const side = Math.min(r.pitch_mm[0], r.pitch_mm[1]);
-    for (let i = 0; i < r.n_channels; i++) sideByIndex.set(r.first_channel + i, side);
+    for (let i = 0; i < r.n_channels; i++) {
+      sideByIndex.set(r.first_channel + i, side);
+      areaByIndex.set(r.first_channel + i, r.pitch_mm[0] * r.pitch_mm[1]);
+    }
   }
   const pitch = Math.min(...layout.regions.map((r) => Math.min(r.pitch_mm[0], r.pitch_mm[1])));
   return {
     pitch, regions: true,
     side: layout.channels.map((c) => sideByIndex.get(c.index) || pitch),
+    area: layout.channels.map((c) => areaByIndex.get(c.index) || pitch * pitch),
     sideByIndex,
     frameSlot: new Map(layout.channels.map((c, k) => [c.index, k])),
     x0: Math.min(...boxes.map((b) => b[0])), y0: Math.min(...boxes.map((b) => b[1])),

@@ -15,16 +15,17 @@ const LINE_COP_X = "#b38cff";
 const LINE_COP_Y = "#3fd09c";
 
 // one point of the trend chart from a frame: the gateway's own figures (no page threshold)
-function histPoint(f) {
+function histPoint(f, d) {
   return {
     t: f.t, total: f.total_force_n, area: f.contact_area_mm2, ref: refTotal(f), peak: f.peak_force_n,
+    peakK: slotOf(d, f.peak_channel),
     cx: f.cop_mm ? f.cop_mm[0] : null, cy: f.cop_mm ? f.cop_mm[1] : null,
   };
 }
 // one point of the trend chart from the history endpoint's point
 function historyPoint(p) {
   return {
-    t: p.t, total: p.force_n, area: p.area_mm2, ref: null, peak: p.peak_n,
+    t: p.t, total: p.force_n, area: p.area_mm2, ref: null, peak: p.peak_n, peakK: -1,
     cx: p.cop_x_mm === undefined ? null : p.cop_x_mm, cy: p.cop_y_mm === undefined ? null : p.cop_y_mm,
   };
 }
@@ -72,7 +73,7 @@ function drawHistory(canvas, d) {
   const tEnd = hist.length ? hist[hist.length - 1].t : 0;
   const hasRef = hist.some((p) => p.ref !== null && p.ref !== undefined);
   const val = (p, key) => {
-    if (key === "peak") return toUnit(d, p.peak);
+    if (key === "peak") return toUnit(d, p.peak, p.peakK);
     if (key === "total" || key === "ref") return chartTotal(p, p[key]);
     return p[key];
   };
@@ -176,8 +177,8 @@ function signedValues() {
     const fa = playback.frames[mapMode.a];
     const fb = playback.frames[mapMode.b];
     return fb.force_n.map((v, k) => {
-      const x = toUnit(d, v);
-      const y = toUnit(d, fa.force_n[k]);
+      const x = toUnit(d, v, k);
+      const y = toUnit(d, fa.force_n[k], k);
       return x === null || y === null ? null : x - y;
     });
   }
@@ -186,7 +187,7 @@ function signedValues() {
     if (!f || !f.reference_force_n) return null;
     return f.force_n.map((v, k) => {
       const ref = f.reference_force_n[k];
-      return v === null || ref === null ? null : toUnit(d, v) - toUnit(d, ref);
+      return v === null || ref === null ? null : toUnit(d, v, k) - toUnit(d, ref, k);
     });
   }
   return null;
@@ -331,7 +332,7 @@ function seek(t) {
   d.trail = [];
   for (let i = k; i >= 0 && pb.frames[i].t >= f.t - HISTORY_S; i--) {
     const g = pb.frames[i];
-    d.history.unshift(histPoint(g));
+    d.history.unshift(histPoint(g, d));
     if (g.t >= f.t - TRAIL_S && g.cop_mm) d.trail.unshift([g.t, g.cop_mm[0], g.cop_mm[1]]);
   }
   updateAuto(d, performance.now());

@@ -51,7 +51,7 @@ function roiStats(d, r) {
   if (r.configured) {
     const g = r.figures;
     return {
-      total_n: g.force_n, peak_n: g.peak_n, area_mm2: g.area_mm2,
+      total_n: g.force_n, peak_n: g.peak_n, peak_k: -1, area_mm2: g.area_mm2,
       cop: g.cop_x_mm === null || g.cop_x_mm === undefined ? null : [g.cop_x_mm, g.cop_y_mm],
     };
   }
@@ -113,7 +113,7 @@ function updateRois(d) {
     row.dataset.copx = s.cop ? String(s.cop[0]) : "";
     row.dataset.copy = s.cop ? String(s.cop[1]) : "";
     row.querySelector(".sum").textContent = fmtU(totalInUnit(s.total_n, area));
-    row.querySelector(".peak").textContent = fmtU(toUnit(d, s.peak_n));
+    row.querySelector(".peak").textContent = fmtU(toUnit(d, s.peak_n, s.peak_k));
     row.querySelector(".area").textContent = fmt(area, 2);
     row.querySelector(".cop").textContent = s.cop ? `${fmt(s.cop[0], 2)}, ${fmt(s.cop[1], 2)}` : "–";
   });

@@ -16,13 +16,23 @@ const UNITS = ["N", "kPa", "mmHg"];
 // the factor from N/mm^2 to the shown pressure unit
 function pressureFactor() { return view.unit === "mmHg" ? 1000 * MMHG_PER_KPA : 1000; }
 function unitLabel() { return view.unit; }
-// the area of one cell (mm^2) of a device, or null where the layout has none
-function cellArea(d) { return d.layout.cell_area_mm2 || null; }
-// N -> the shown unit's value for one channel (null where there is no value)
-function toUnit(d, force) {
+// the area (mm^2) of the cell of frame slot k (on a device of regions, its region's; k
+// undefined or -1: the layout's cell), or null where the layout has none
+function cellArea(d, k) {
+  if (d.geo.area && k !== undefined && k !== null && k >= 0) return d.geo.area[k];
+  return d.layout.cell_area_mm2 || (d.geo.area ? Math.min(...d.geo.area) : null);
+}
+// the frame slot of a channel by name, or -1
+function slotOf(d, name) {
+  if (!d.slotByName) d.slotByName = new Map(d.layout.channels.map((c, k) => [c.name, k]));
+  const k = d.slotByName.get(name);
+  return k === undefined ? -1 : k;
+}
+// N -> the shown unit's value for the channel of frame slot k (null where there is no value)
+function toUnit(d, force, k) {
   if (force === null || force === undefined) return null;
   if (view.unit === "N") return force;
-  const area = cellArea(d);
+  const area = cellArea(d, k);
   return area ? (force * pressureFactor()) / area : null;
 }
 // a total force (N) over a contact area (mm^2) in the shown unit: the force itself, or the mean
@@ -82,12 +92,12 @@ function inContact(d, f, k) {
   if (force === null || force <= 0) return false;
   const thr = threshold();
   if (thr <= 0) return true;
-  const v = toUnit(d, force);
+  const v = toUnit(d, force, k);
   return v !== null && v >= thr;
 }
 // the drawn value of channel k (shown unit): below the threshold a channel draws as no contact
 function shownValue(d, f, k) {
-  const v = toUnit(d, f.force_n[k]);
+  const v = toUnit(d, f.force_n[k], k);
   return v !== null && threshold() > 0 && v < threshold() ? 0 : v;
 }
 // the page's figures of a frame over a set of channels (frame slots; all when null): total
@@ -97,10 +107,11 @@ function frameStats(d, f, slots) {
   if (!slots && threshold() <= 0) {
     return {
       total_n: f.total_force_n, area_mm2: f.contact_area_mm2, in_contact: f.channels_in_contact,
-      peak: f.peak_channel, peak_n: f.peak_force_n, cop: f.cop_mm,
+      peak: f.peak_channel, peak_n: f.peak_force_n, peak_k: slotOf(d, f.peak_channel), cop: f.cop_mm,
     };
   }
-  const area = cellArea(d) || (d.geo.pitch * d.geo.pitch);
+  let area = 0;
+  let peakK = -1;
   let total = 0;
   let n = 0;
   let peak = null;
@@ -113,13 +124,14 @@ function frameStats(d, f, slots) {
     const force = f.force_n[k];
     const c = d.layout.channels[k];
     total += force;
+    area += cellArea(d, k) || d.geo.pitch * d.geo.pitch;
     n++;
     sx += force * c.x_mm;
     sy += force * c.y_mm;
-    if (peakN === null || force > peakN) { peakN = force; peak = c.name; }
+    if (peakN === null || force > peakN) { peakN = force; peak = c.name; peakK = k; }
   }
   return {
-    total_n: total, area_mm2: n * area, in_contact: n, peak, peak_n: peakN,
+    total_n: total, area_mm2: area, in_contact: n, peak, peak_n: peakN, peak_k: peakK,
     cop: total > 0 ? [sx / total, sy / total] : null,
   };
 }
