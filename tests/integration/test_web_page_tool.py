@@ -156,6 +156,11 @@ async def test_the_map_is_legible_at_phone_width(browser: Any, tmp_path: Path) -
         assert (await text(page, "#tooltip")).startswith("ch05 (2.5, 2.5 mm): 1.000 N")
         width = await page.evaluate("() => document.documentElement.scrollWidth")
         assert width <= 375, f"the tooltip widens the page to {width} px"
+        # the trend chart is drawn at its shown width (its 12 px text not scaled down)
+        chart = await page.evaluate(
+            "() => { const c = document.getElementById('history'); return [c.width, c.clientWidth]; }"
+        )
+        assert chart[1] <= 375 and abs(chart[0] - chart[1]) <= 1, chart
         shot = tmp_path / "phone.png"
         await page.screenshot(path=str(shot), full_page=True)
         shot_to("TACTILE_SCREENSHOT_PHONE", shot)

@@ -55,7 +55,14 @@ async function loadHistory(d) {
 // the value of a point in the shown unit: totals as the mean pressure over the contact area
 function chartTotal(p, v) { return view.unit === "N" ? v : totalInUnit(v, p.area); }
 
+// the chart's canvas drawn at its shown width (a phone's narrow chart keeps 12 px text)
+function fitChart(canvas) {
+  const w = Math.max(280, Math.min(900, Math.round(canvas.clientWidth || 900)));
+  if (canvas.width !== w) canvas.width = w;
+}
+
 function drawHistory(canvas, d) {
+  fitChart(canvas);
   const ctx = canvas.getContext("2d");
   const w = canvas.width;
   const h = canvas.height;
