@@ -25,7 +25,7 @@ from functools import lru_cache
 from typing import Final, Literal
 
 from ..runtime.counters import DEFAULT_DURATION_BUCKETS_S, READ_ERROR_REASONS, DeviceCounters, HistogramData
-from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, FloatArray
+from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, FloatArray, RoiQuantities
 
 __all__ = ["FAMILIES", "Family", "HistogramSample", "Sample"]
 
@@ -130,6 +130,28 @@ def _center_of_pressure(
         if math.isfinite(x) and math.isfinite(y):
             yield (device, "x"), float(x)
             yield (device, "y"), float(y)
+
+
+def _roi_value(value: Callable[[RoiQuantities], float], scale: float = 1.0) -> Sampler:
+    """Samples ``(device, roi)`` of one quantity of each region of interest, times ``scale``."""
+
+    def samples(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
+        for roi in dev.rois:
+            v = value(roi)
+            if math.isfinite(v):
+                yield (device, roi.name), float(v) * scale
+
+    return samples
+
+
+def _roi_center_of_pressure(
+    device: str, dev: DeviceSnapshot, counters: DeviceCounters | None
+) -> Iterator[Sample]:
+    """x then y of each region's centre of pressure, m; nothing for a region not in contact."""
+    for roi in dev.rois:
+        if roi.cop_mm is not None and math.isfinite(roi.cop_mm[0]) and math.isfinite(roi.cop_mm[1]):
+            yield (device, roi.name, "x"), roi.cop_mm[0] * 1e-3
+            yield (device, roi.name, "y"), roi.cop_mm[1] * 1e-3
 
 
 def _clock_faults(device: str, dev: DeviceSnapshot, counters: DeviceCounters | None) -> Iterator[Sample]:
@@ -323,6 +345,37 @@ FAMILIES: Final[tuple[Family, ...]] = (
         f"Number of channels in contact (count), {_FROM_POLL}",
         ("device",),
         _device_value(lambda dev: dev.channels_in_contact),
+    ),
+    Family(
+        "tactile_roi_force_newtons",
+        "gauge",
+        "Sum of the forces of a region of interest's channels in contact in newtons (N), " + _FROM_POLL,
+        ("device", "roi"),
+        _roi_value(lambda roi: roi.force_n),
+    ),
+    Family(
+        "tactile_roi_peak_force_newtons",
+        "gauge",
+        "Largest force of a region of interest's channels in newtons (N; 0 when none is in contact), "
+        + _FROM_POLL,
+        ("device", "roi"),
+        _roi_value(lambda roi: roi.peak_n),
+    ),
+    Family(
+        "tactile_roi_contact_area_square_metres",
+        "gauge",
+        "Contact area of a region of interest in square metres (m^2): the cells of its channels in contact, "
+        + _FROM_POLL,
+        ("device", "roi"),
+        _roi_value(lambda roi: roi.area_mm2, 1e-6),
+    ),
+    Family(
+        "tactile_roi_center_of_pressure_metres",
+        "gauge",
+        f"Force-weighted centre of pressure of a region of interest in metres (m), {_FROM_POLL}; "
+        "absent when none of its channels is in contact",
+        ("device", "roi", "axis"),
+        _roi_center_of_pressure,
     ),
     Family(
         "tactile_dead_taxels",

@@ -45,13 +45,13 @@ from __future__ import annotations
 
 import math
 import struct
-from typing import Any, Final, TypedDict
+from typing import Any, Final, NotRequired, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import GatewayError
-from ..runtime.frame import DECIMALS, Frame, compact_json, frame_of
+from ..runtime.frame import DECIMALS, Frame, RoiJson, compact_json, frame_of, roi_json
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, finite_or_none
 
 __all__ = [
@@ -95,6 +95,9 @@ class FrameFields(TypedDict):
     force_static_n: list[float | None]
     resistance_ohm: list[float | None]
     status: list[str]
+    #: the device's regions of interest, when it has any (JSON only: the binary layout does
+    #: not carry them): the page's frame's ``rois`` (``web.frames.RoiJson``)
+    rois: NotRequired[list[RoiJson]]
 
 
 class FrameDecodeError(GatewayError):
@@ -113,7 +116,7 @@ def frame_dict(source: DeviceSnapshot | Frame, sequence: int) -> FrameFields:
     float rounded to ``DECIMALS`` decimals): a view of the snapshot's shared ``Frame``."""
     f = frame_of(source) if isinstance(source, DeviceSnapshot) else source
     cop = f.center_of_pressure_mm
-    return {
+    out: FrameFields = {
         "sequence": int(sequence),
         "device": f.device,
         "host_time_s": f.host_time_s,
@@ -129,6 +132,9 @@ def frame_dict(source: DeviceSnapshot | Frame, sequence: int) -> FrameFields:
         "resistance_ohm": list(f.resistance_ohm),
         "status": [_LABELS[s] for s in f.status],
     }
+    if f.rois:
+        out["rois"] = [roi_json(r) for r in f.rois]
+    return out
 
 
 def encode_json(frame: FrameFields) -> bytes:

@@ -17,14 +17,14 @@ to decimals, not to significant digits, keeps the Unix time to the microsecond.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any, Final, TypedDict
 
 import numpy as np
 import orjson
 
-from .snapshot import ChannelStatus, DeviceSnapshot, finite_or_none
+from .snapshot import ChannelStatus, DeviceSnapshot, RoiQuantities, finite_or_none
 
-__all__ = ["DECIMALS", "Frame", "compact_json", "frame_of"]
+__all__ = ["DECIMALS", "Frame", "RoiJson", "compact_json", "frame_of", "roi_json", "rounded_roi"]
 
 #: Decimals of every published float.
 DECIMALS: Final = 6
@@ -61,6 +61,8 @@ class Frame:
     channels_in_contact: int
     peak_channel: str | None
     peak_force_n: float | None
+    #: the regions of interest (``snapshot.RoiQuantities``, rounded), in configuration order
+    rois: tuple[RoiQuantities, ...] = ()
 
     @classmethod
     def of(cls, snap: DeviceSnapshot) -> Frame:
@@ -90,7 +92,46 @@ class Frame:
             channels_in_contact=int(snap.channels_in_contact),
             peak_channel=snap.peak_channel,
             peak_force_n=finite_or_none(snap.peak_force_n, DECIMALS),
+            rois=tuple(map(rounded_roi, snap.rois)),
         )
+
+
+def rounded_roi(r: RoiQuantities) -> RoiQuantities:
+    """A region of interest's quantities as published: rounded to ``DECIMALS``."""
+    cop = None if r.cop_mm is None else (_rounded(r.cop_mm[0]), _rounded(r.cop_mm[1]))
+    return RoiQuantities(
+        r.name, r.channels, _rounded(r.force_n), _rounded(r.peak_n), _rounded(r.area_mm2), cop
+    )
+
+
+class RoiJson(TypedDict):
+    """One region of interest in a frame: its name, its channels (their ``index`` in the
+    layout's ``channels``), and over those in contact the sum of force and the peak (N; 0
+    when none is), the contact area (mm^2) and the centre of pressure (mm; null when none
+    is in contact)."""
+
+    name: str
+    channels: list[int]
+    force_n: float
+    peak_n: float
+    area_mm2: float
+    cop_x_mm: float | None
+    cop_y_mm: float | None
+
+
+def roi_json(r: RoiQuantities) -> RoiJson:
+    """A region of interest (already rounded: ``rounded_roi``) as a frame's JSON (the page's
+    and MQTT's)."""
+    cop = r.cop_mm
+    return {
+        "name": r.name,
+        "channels": list(r.channels),
+        "force_n": r.force_n,
+        "peak_n": r.peak_n,
+        "area_mm2": r.area_mm2,
+        "cop_x_mm": None if cop is None else cop[0],
+        "cop_y_mm": None if cop is None else cop[1],
+    }
 
 
 def frame_of(snap: DeviceSnapshot) -> Frame:

@@ -51,6 +51,7 @@ from numpy.typing import NDArray
 
 from ..modbus.image import RawSample
 from .processor import DeviceProcessor
+from .rois import roi_quantities, roi_slots
 from .snapshot import IN_CONTACT, ChannelStatus, DeviceSnapshot, StaticEstimate, read_only
 
 __all__ = [
@@ -271,6 +272,7 @@ def held_snapshots(
     q = _quantities(force, status, processor.x_mm, processor.y_mm)
     area_mm2 = _contact_areas(force, status, processor.cell_areas_mm2)
     names = processor.names
+    rois = roi_slots(processor.device.rois, processor.index)
     out: list[DeviceSnapshot] = []
     columns = zip(run.sample_time_s[chosen].tolist(), *(a.tolist() for a in q), strict=True)
     for i, (t, total, x, y, n_contact, peak) in enumerate(columns):
@@ -290,6 +292,9 @@ def held_snapshots(
             peak_channel=None if n_contact == 0 else names[peak],
             peak_force_n=None if n_contact == 0 else float(force[i, peak]),
             temperature_c=read_only(temperature[i]) if has_temperature else None,
+            rois=roi_quantities(
+                rois, force[i], status[i], processor.x_mm, processor.y_mm, processor.cell_areas_mm2
+            ),
         )
         out.append(DeviceSnapshot(**fixed))
     return out, n_samples

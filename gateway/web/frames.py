@@ -17,7 +17,7 @@ from collections.abc import Iterable, Sequence
 from typing import Any, NotRequired, Protocol, TypedDict
 
 from ..runtime.counters import DeviceCounters
-from ..runtime.frame import DECIMALS, Frame, compact_json, frame_of
+from ..runtime.frame import DECIMALS, Frame, RoiJson, compact_json, frame_of, roi_json
 from ..runtime.snapshot import STATUS_LABELS, DeviceSnapshot, StatusWordReading, finite_or_none
 from .region_layout import RegionDescription, groups_json, regions_json
 
@@ -54,6 +54,8 @@ class PageFrame(TypedDict):
     polls_total: int
     reads_total: int
     read_errors_total: int
+    #: the regions of interest (``[[bus.device.roi]]``), in configuration order; [] for none
+    rois: list[RoiJson]
     #: the device's named status words at this poll (``status_word_json``), when it has any
     device_status: NotRequired[list[dict[str, Any]]]
 
@@ -194,6 +196,7 @@ def frame_json(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounter
         "polls_total": c.polls_total,
         "reads_total": c.reads_total,
         "read_errors_total": sum(c.read_errors_total.values()),
+        "rois": [roi_json(r) for r in f.rois],
     }
     if isinstance(source, DeviceSnapshot) and source.status_words:
         out["device_status"] = [status_word_json(w) for w in source.status_words]

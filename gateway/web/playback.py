@@ -35,10 +35,10 @@ import numpy as np
 from aiohttp import web
 
 from ..runtime.counters import DeviceCounters
-from ..runtime.frame import DECIMALS, compact_json
+from ..runtime.frame import DECIMALS, compact_json, rounded_roi
 from ..runtime.snapshot import DeviceSnapshot, finite_or_none
 from .app import PageFiles
-from .frames import DeviceDescription, PageFrame, layout_json
+from .frames import DeviceDescription, PageFrame, layout_json, roi_json
 
 #: The most frames a playback sends to the page (about 12 MB of JSON for 16 channels).
 MAX_FRAMES = 20_000
@@ -125,6 +125,7 @@ def page_frames(snapshots: Sequence[DeviceSnapshot], *, has_reference: bool) -> 
             "polls_total": counters.polls_total,
             "reads_total": counters.reads_total,
             "read_errors_total": read_errors,
+            "rois": [roi_json(rounded_roi(r)) for r in snap.rois],
             "reference_total_force_n": reference,
         }  # fmt: skip
         if refs is not None:

@@ -8,7 +8,7 @@ import contextlib
 import shutil
 import time
 from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -17,6 +17,7 @@ from test_gateway_tcp import array_device
 
 from gateway.config import ChannelConfig, DeviceConfig, RegisterMap, bus_config_for, gateway_config_for
 from gateway.config.layout import GridLayout
+from gateway.config.rois import Roi
 from gateway.metrics.collector import make_registry
 from gateway.metrics.server import MAX_CONNECTIONS, MetricsServer
 from gateway.metrics.web_config import WebConfig
@@ -131,9 +132,11 @@ async def gateway_with_page(
     *,
     max_connections: int = MAX_CONNECTIONS,
     write_timeout_s: float = WRITE_TIMEOUT_S,
+    rois: tuple[Roi, ...] = (),
 ) -> AsyncIterator[Gateway]:
     """The simulated array served over loopback Modbus TCP, polled at 20 Hz, and the server
-    with the page on an ephemeral port; the simulator can be stopped and restarted."""
+    with the page on an ephemeral port; the simulator can be stopped and restarted. ``rois``:
+    the device's regions of interest."""
     holder = SnapshotHolder()
     registry = make_registry(holder.get, CollectorRegistry())
     hub = FrameHub(holder)
@@ -146,7 +149,7 @@ async def gateway_with_page(
     gw = Gateway(indentation_array(speed), server, holder, hub, 0, contextlib.AsyncExitStack(), page)
     try:
         await gw.start_sim()
-        device = array_device(gw.array, "arr", bench=False)
+        device = replace(array_device(gw.array, "arr", bench=False), rois=rois)
         configs.append(device)
         bus = bus_config_for("sim", "tcp", [device], host="127.0.0.1", port=gw.sim_port,
                              poll_interval_s=0.05, timeout_s=0.3, backoff_max_s=0.3)  # fmt: skip

@@ -123,7 +123,7 @@ def test_the_page_json_of_the_frame_byte_for_byte() -> None:
         b'"last_success_t":1699999999.5,"up":true,"error":null,"force_n":[1.25,null],"status":[0,5],'
         b'"total_force_n":1.25,"cop_mm":[0.0,0.0],"contact_area_mm2":6.25,"channels_in_contact":1,'
         b'"peak_channel":"a1","peak_force_n":1.25,"poll_interval_s":0.05,"polls_total":8,'
-        b'"reads_total":9,"read_errors_total":3}'
+        b'"reads_total":9,"read_errors_total":3,"rois":[]}'
     )
 
 
