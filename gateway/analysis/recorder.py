@@ -10,17 +10,18 @@ are flushed, so an interrupted recording is a valid record of everything read so
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import threading
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO, TextIO, cast
 
 from ..atomic import AtomicFile
 from ..config import GatewayConfig
-from ..runtime.snapshot import READING_STATUSES, ChannelStatus, GatewaySnapshot
+from ..runtime.snapshot import READING_STATUSES, ChannelStatus, DeviceSnapshot, GatewaySnapshot
 from .mcap_records import McapRecordWriter, is_mcap_record
 from .records import REQUIRED_COLUMNS, RecordWriter
 
@@ -137,6 +138,23 @@ class LiveRecorder:
         if rows:
             self._writer.flush()
             self.stats.rows += rows
+
+
+def export_record(
+    config: GatewayConfig,
+    device: str,
+    snapshots: Sequence[DeviceSnapshot],
+    metadata: Mapping[str, str] | None = None,
+) -> str:
+    """The record (CSV text, ``docs/record-format.md``) of ``device``'s polls ``snapshots``
+    (oldest first), row for row what ``record`` writes of them (``LiveRecorder``): the page's
+    export (``/api/devices/{name}/export.csv``). ``time_s`` counts from the first poll."""
+    out = io.StringIO()
+    recorder = LiveRecorder(out, config, metadata=metadata, device=device)
+    for seq, snap in enumerate(snapshots, start=1):
+        recorder(GatewaySnapshot.build({device: snap}, {}, seq))
+    recorder.close()
+    return out.getvalue()
 
 
 #: How much of an existing file ``is_record_file`` reads to find the header row.

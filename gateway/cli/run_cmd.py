@@ -16,10 +16,11 @@ import contextlib
 import json
 import logging
 import math
+import os
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -104,10 +105,19 @@ def _page(
         except KeyError:  # a device a reload removed
             return []
 
+    def export_csv(name: str, snapshots: Sequence[DeviceSnapshot]) -> str:
+        from ..analysis.recorder import export_record  # the page's export only: not at start-up
+
+        meta = {"source": f"tactile-gateway export of {name}"}
+        if current[0].source is not None:
+            meta["config"] = os.path.abspath(current[0].source)  # view finds it (# config:)
+        return export_record(current[0], name, snapshots, meta)
+
     return WebPage(
-        FrameHub(holder),
+        FrameHub(holder, history_s=config.web.history_s, export_s=config.web.export_s),
         device_configs=lambda: [d for b in current[0].buses for d in b.devices],
         what_is_on=what_is_on,
+        export_csv=export_csv,
     )
 
 

@@ -45,11 +45,12 @@ from .schema import (
     TlsConfig,
 )
 from .tables import REQUIRED, Context, Table, check_exists, check_private, parse_toml, read_text_file
+from .web import parse_web
 
 _HOST_RE: Final = re.compile(
     r"(?=.{1,253}\Z)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62})(?:\.[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,62}))*\.?"
 )
-ROOT_KEYS: Final = ("metrics", "bus", "mqtt", "foxglove")
+ROOT_KEYS: Final = ("metrics", "bus", "mqtt", "foxglove", "web")
 _METRICS_KEYS: Final = ("address", "web_config", "page")
 _BUS_KEYS: Final = (
     "name",
@@ -95,7 +96,10 @@ def parse_config(text: str, source: Path | None = None) -> GatewayConfig:
     check_unique_names(ctx, buses)
     mqtt = parse_mqtt(ctx, root)
     foxglove = parse_foxglove(ctx, root, tuple(d.name for b in buses for d in b.devices))
-    return GatewayConfig(metrics=metrics, buses=buses, source=ctx.source, mqtt=mqtt, foxglove=foxglove)
+    web = parse_web(ctx, root)
+    return GatewayConfig(
+        metrics=metrics, buses=buses, source=ctx.source, mqtt=mqtt, foxglove=foxglove, web=web
+    )
 
 
 def _parse_host(value: str) -> str | None:

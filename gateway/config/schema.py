@@ -36,8 +36,10 @@ from .limits import MAX_CHANNELS, MAX_PITCH_MM, MAX_POSITION_MM, PITCH_MM, POSIT
 from .mqtt import MqttConfig
 from .regions import Region
 from .rois import Roi
+from .web import WebSettings
 
 NO_CHECKS: Final = DeviceChecks()
+DEFAULT_WEB: Final = WebSettings()
 
 __all__ = [
     "BUS_KINDS",
@@ -441,6 +443,7 @@ class GatewayConfig:
     source: Path | None
     mqtt: MqttConfig | None = None  # publishing to a broker: off when None
     foxglove: FoxgloveConfig | None = None  # serving Foxglove's WebSocket protocol: off when None
+    web: WebSettings = DEFAULT_WEB  # what the page's server keeps of the past ([web])
 
     def __post_init__(self) -> None:
         buses = [b.name for b in self.buses]

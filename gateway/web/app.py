@@ -11,7 +11,12 @@
   is the sequence number; a client that falls behind loses the oldest frames, sees a gap and
   each frame carries ``dropped``, its count of lost frames; the hub counts them per device);
 * ``/api/live[?device=NAME...]``: server-sent events for the page, the newest frame of each
-  device at most ``max_fps`` times a second (newest frame wins, no queue).
+  device at most ``max_fps`` times a second (newest frame wins, no queue);
+* ``/api/devices/{name}/history?seconds=S``: the hub's summaries of the device's last S
+  seconds of polls (``web.history``; 404 when the hub keeps none);
+* ``/api/devices/{name}/export.csv?from_s=A&to_s=B``: the readings the hub keeps between two
+  host times (Unix s; default the last 10 s) as a record (``docs/record-format.md``), written
+  by the ``export_csv`` it is given (the recorder's writer; 404 without one).
 
 An event stream holds a connection for as long as it runs (the server keeps a share of its
 connections for ``/metrics``); a write that a client does not take within
@@ -33,12 +38,13 @@ import json
 import math
 import socket
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from importlib import resources
 from typing import Any
 
 from aiohttp import web
 
+from ..runtime.snapshot import DeviceSnapshot
 from .frames import DeviceDescription, encode_frame, layout_json, with_dropped
 from .hub import FrameHub
 
@@ -59,6 +65,10 @@ STATIC_FILES: dict[str, str] = {
 KEEPALIVE_S = 15.0
 #: a stream's write not taken by the client within this ends the stream (a stalled reader)
 WRITE_TIMEOUT_S = 10.0
+#: the span an export gives without ``from_s`` (s before ``to_s``)
+EXPORT_DEFAULT_S = 10.0
+#: ``export_csv(device, snapshots)``: the record (CSV text) of a device's polls, oldest first
+ExportCsv = Callable[[str, Sequence[DeviceSnapshot]], str]
 #: an event stream's kernel send buffer (bytes; the kernel doubles it for its bookkeeping):
 #: over a second of frames of a 64-channel array at 100 polls/s, far below the megabytes
 #: the kernel's autotuning would let a stalled client hold
@@ -70,6 +80,20 @@ _ENDED = (ConnectionError, RuntimeError)  # the client went away mid-write
 def _json(data: Any, status: int = 200) -> web.Response:
     body = json.dumps(data, separators=(",", ":"), allow_nan=False).encode()
     return web.Response(status=status, body=body, headers={"Content-Type": "application/json"})
+
+
+def _query_number(request: web.Request, key: str, default: float, allowed: str) -> float:
+    """The finite number ``key`` of the query, or ``default``; 400 naming it otherwise."""
+    raw = request.query.get(key)
+    if raw is None:
+        return float(default)
+    try:
+        value = float(raw)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise web.HTTPBadRequest(text=f"{key}: {raw[:40]!r} is not a number; allowed: {allowed}\n")
+    return value
 
 
 class PageFiles:
@@ -118,8 +142,11 @@ class WebPage:
         write_timeout_s: float = WRITE_TIMEOUT_S,
         device_configs: Callable[[], Iterable[DeviceDescription]] | None = None,
         what_is_on: Callable[[str], list[str]] | None = None,
+        export_csv: ExportCsv | None = None,
     ) -> None:
         self.hub = hub
+        #: writes an export in the record format (``analysis.recorder.export_record``)
+        self.export_csv = export_csv
         #: a device's "what is on" lines (values, force, drift correction and its clock,
         #: parameters, assumptions, writes), as check-config prints them
         self.what_is_on = what_is_on
@@ -142,6 +169,8 @@ class WebPage:
         r.add_get("/api/devices/{name}/frame", self._frame)
         r.add_get("/api/devices/{name}/stream", self._stream)
         r.add_get("/api/live", self._live)
+        r.add_get("/api/devices/{name}/history", self._history)
+        r.add_get("/api/devices/{name}/export.csv", self._export)
         app.on_startup.append(self._attach)
         app.on_shutdown.append(self._close)
         app.on_cleanup.append(self._detach)
@@ -170,6 +199,8 @@ class WebPage:
             seq=entry.seq,
             stream_frames_dropped_total=self.hub.dropped_total.get(name, 0),
             what_is_on=self.what_is_on(name) if self.what_is_on is not None else [],
+            history_s=self.hub.history_s,
+            export_s=self.hub.export_s if self.export_csv is not None else 0.0,
         )
         return out
 
@@ -198,6 +229,45 @@ class WebPage:
                                              headers={"Retry-After": retry})  # fmt: skip
         body = encode_frame(entry.snapshot, entry.seq, entry.counters)
         return web.Response(body=body, headers={"Content-Type": "application/json"})
+
+    async def _history(self, request: web.Request) -> web.Response:
+        name = request.match_info["name"]
+        past = self.hub.history(name)
+        if past is None or past.history_s <= 0:
+            if self.hub.latest(name) is None:
+                raise web.HTTPNotFound(text=f"no device {name!r}\n")
+            raise web.HTTPNotFound(text="this gateway keeps no history ([web] history_s = 0)\n")
+        seconds = _query_number(request, "seconds", past.history_s, f"0 < seconds <= {past.history_s:g}")
+        if seconds <= 0.0:
+            raise web.HTTPBadRequest(text=f"seconds: {seconds!r} is out of range; allowed: 0 < seconds\n")
+        points = past.points(min(seconds, past.history_s))
+        return _json({"device": name, "history_s": past.history_s,
+                      "points": [past.json_point(p) for p in points]})  # fmt: skip
+
+    async def _export(self, request: web.Request) -> web.Response:
+        name = request.match_info["name"]
+        past = self.hub.history(name)
+        if self.export_csv is None or past is None or past.export_s <= 0:
+            if self.hub.latest(name) is None:
+                raise web.HTTPNotFound(text=f"no device {name!r}\n")
+            raise web.HTTPNotFound(text="this gateway keeps no readings to export ([web] export_s = 0)\n")
+        newest = past.newest_s()
+        to_s = _query_number(
+            request, "to_s", newest if newest is not None else time.time(), "a Unix time in s"
+        )
+        from_s = _query_number(request, "from_s", to_s - EXPORT_DEFAULT_S, "a Unix time in s")
+        if from_s > to_s:
+            raise web.HTTPBadRequest(
+                text=f"from_s ({from_s:g}) is after to_s ({to_s:g}); allowed: from_s <= to_s\n"
+            )
+        # a worker thread writes it (up to a million readings): the loop keeps serving streams
+        loop = asyncio.get_running_loop()
+        text = await loop.run_in_executor(None, self.export_csv, name, past.export(from_s, to_s))
+        return web.Response(
+            body=text.encode(),
+            headers={"Content-Type": "text/csv; charset=utf-8",
+                     "Content-Disposition": f'attachment; filename="{name}.csv"'},
+        )  # fmt: skip
 
     async def _open_events(self, resp: web.StreamResponse, request: web.Request) -> None:
         sock = request.transport.get_extra_info("socket") if request.transport is not None else None

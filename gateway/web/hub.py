@@ -34,6 +34,7 @@ from ..runtime.frame import frame_of
 from ..runtime.poller import SnapshotHolder
 from ..runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from .frames import encode_frame
+from .history import DeviceHistory
 
 Wakeup = Callable[[], None]
 Schedule = Callable[[Callable[[], None]], object]
@@ -135,8 +136,19 @@ class FrameHub:
     """Numbers every device poll and offers its encoded frame to the attached clients."""
 
     def __init__(
-        self, holder: SnapshotHolder | None = None, *, stream_capacity: int = 256, inbox_capacity: int = 4096
+        self,
+        holder: SnapshotHolder | None = None,
+        *,
+        stream_capacity: int = 256,
+        inbox_capacity: int = 4096,
+        history_s: float = 0.0,
+        export_s: float = 0.0,
     ) -> None:
+        DeviceHistory(history_s, export_s)  # the spans' check, before anything is started
+        #: what the hub keeps of each device's past (``web.history``; s, 0: nothing)
+        self.history_s = float(history_s)
+        self.export_s = float(export_s)
+        self._history: dict[str, DeviceHistory] = {}
         self.stream_capacity = stream_capacity
         self.inbox_capacity = inbox_capacity
         self._lock = threading.Lock()
@@ -218,6 +230,11 @@ class FrameHub:
             self._wake_pending = False
         skip = {name: n - self.stream_capacity for name, n in Counter(n for n, _ in batch).items()}
         for name, entry in batch:
+            if self.history_s > 0 or self.export_s > 0:
+                past = self._history.get(name)
+                if past is None:
+                    past = self._history[name] = DeviceHistory(self.history_s, self.export_s)
+                past.add(entry.snapshot)
             if skip[name] > 0:
                 skip[name] -= 1
                 continue
@@ -228,6 +245,16 @@ class FrameHub:
                     self.dropped_total[name] = self.dropped_total.get(name, 0) + lost
             for p in self._pages:
                 p.offer(name, frame)
+
+    def history(self, device: str) -> DeviceHistory | None:
+        """What the hub keeps of ``device``'s past (server loop only), None when it keeps
+        nothing (``history_s`` and ``export_s`` 0) or the device is not listed."""
+        if self.history_s <= 0 and self.export_s <= 0:
+            return None
+        if self.latest(device) is None:
+            self._history.pop(device, None)  # a device a reload removed
+            return None
+        return self._history.setdefault(device, DeviceHistory(self.history_s, self.export_s))
 
     def open_stream(self, device: str, wakeup: Wakeup = _noop) -> StreamQueue:
         """A new stream client of ``device``: it gets every poll from the next one on."""

@@ -7,7 +7,7 @@ import asyncio
 import contextlib
 import shutil
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -15,7 +15,15 @@ import pytest
 from prometheus_client import CollectorRegistry
 from test_gateway_tcp import array_device
 
-from gateway.config import ChannelConfig, DeviceConfig, RegisterMap, bus_config_for, gateway_config_for
+from gateway.analysis.recorder import export_record
+from gateway.config import (
+    ChannelConfig,
+    DeviceConfig,
+    GatewayConfig,
+    RegisterMap,
+    bus_config_for,
+    gateway_config_for,
+)
 from gateway.config.layout import GridLayout
 from gateway.config.rois import Roi
 from gateway.metrics.collector import make_registry
@@ -26,7 +34,7 @@ from gateway.model import PAPER_EFFECTS, Divider, SensorParams
 from gateway.model.conversion import line_conversion
 from gateway.runtime.poller import Poller, SnapshotHolder
 from gateway.runtime.processor import DeviceProcessor
-from gateway.runtime.snapshot import GatewaySnapshot
+from gateway.runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from gateway.runtime.summary import device_summary
 from gateway.web import FrameHub, WebPage
 from gateway.web.app import WRITE_TIMEOUT_S
@@ -133,16 +141,23 @@ async def gateway_with_page(
     max_connections: int = MAX_CONNECTIONS,
     write_timeout_s: float = WRITE_TIMEOUT_S,
     rois: tuple[Roi, ...] = (),
+    history_s: float = 0.0,
+    export_s: float = 0.0,
 ) -> AsyncIterator[Gateway]:
     """The simulated array served over loopback Modbus TCP, polled at 20 Hz, and the server
     with the page on an ephemeral port; the simulator can be stopped and restarted. ``rois``:
     the device's regions of interest."""
     holder = SnapshotHolder()
     registry = make_registry(holder.get, CollectorRegistry())
-    hub = FrameHub(holder)
+    hub = FrameHub(holder, history_s=history_s, export_s=export_s)
     configs: list[DeviceConfig] = []  # the page reads the device's configuration once it is made
+    whole: list[GatewayConfig] = []
+
+    def export_csv(name: str, snapshots: Sequence[DeviceSnapshot]) -> str:
+        return export_record(whole[0], name, snapshots, {"source": "test export"})
+
     page = WebPage(hub, scale_max_n=scale_max_n, write_timeout_s=write_timeout_s,
-                   device_configs=lambda: configs)  # fmt: skip
+                   device_configs=lambda: configs, export_csv=export_csv)  # fmt: skip
     server = MetricsServer(
         registry, "127.0.0.1", 0, web_config, page.install, max_connections=max_connections
     )
@@ -153,8 +168,9 @@ async def gateway_with_page(
         configs.append(device)
         bus = bus_config_for("sim", "tcp", [device], host="127.0.0.1", port=gw.sim_port,
                              poll_interval_s=0.05, timeout_s=0.3, backoff_max_s=0.3)  # fmt: skip
+        whole.append(gateway_config_for([bus]))
         with server:
-            async with Poller(gateway_config_for([bus]), holder):
+            async with Poller(whole[0], holder):
                 yield gw
     finally:
         await gw.sim.aclose()
