@@ -26,16 +26,19 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import io
 import math
+import os
 import signal
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import click
 import numpy as np
 from prometheus_client import CollectorRegistry
 
-from ..analysis.records import ChannelRecord, Record, names_text, read_record
+from ..analysis.records import ChannelRecord, Record, RecordWriter, names_text, read_record
 from ..config import ChannelConfig, DeviceConfig, Encoding, RegisterMap, load_config
 from ..config.layout import GridLayout
 from ..errors import ConfigError, RecordError
@@ -210,7 +213,32 @@ def load_playback(
     except ValueError as exc:
         raise ViewError(f"{record_path}: {exc}") from None
     playback.info["layout_from"] = how
-    return playback
+    return replace(playback, export_csv=lambda a, b: record_span_csv(record, a, b, config_path))
+
+
+def record_span_csv(record: Record, from_s: float, to_s: float, config_path: Path | None = None) -> str:
+    """The rows of ``record`` with times from ``from_s`` to ``to_s`` (s) as a record (CSV text,
+    by the one writer, ``RecordWriter``), in time order, the record's columns kept: the page's
+    export in playback. ``time_s`` stays the record's."""
+    channels = list(record.channels.values())
+    has_force = bool(channels) and all(c.force_n is not None for c in channels)
+    has_temp = bool(channels) and all(c.temperature_c is not None for c in channels)
+    meta = {k: v for k, v in record.metadata.items() if k != "config"}
+    meta["source"] = f"tactile-gateway view export of {record.path}, {from_s:g} to {to_s:g} s"
+    if config_path is not None:
+        meta["config"] = os.path.abspath(config_path)
+    out = io.StringIO()
+    writer = RecordWriter(out, meta, has_force=has_force, has_temperature=has_temp)
+    rows = []
+    for k, c in enumerate(channels):
+        for i in np.flatnonzero((c.time_s >= from_s) & (c.time_s <= to_s)).tolist():
+            force = float(c.force_n[i]) if has_force and c.force_n is not None else None
+            temp = float(c.temperature_c[i]) if has_temp and c.temperature_c is not None else None
+            rows.append((float(c.time_s[i]), k, i, c.name, float(c.resistance_ohm[i]), force, temp))
+    for t, _, _, name, r, force, temp in sorted(rows, key=lambda row: row[:3]):
+        writer.row(t, name, r, force, temp)
+    writer.close()
+    return out.getvalue()
 
 
 async def _serve_until_stopped(server: MetricsServer, what: str) -> None:

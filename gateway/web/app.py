@@ -82,7 +82,7 @@ def _json(data: Any, status: int = 200) -> web.Response:
     return web.Response(status=status, body=body, headers={"Content-Type": "application/json"})
 
 
-def _query_number(request: web.Request, key: str, default: float, allowed: str) -> float:
+def query_number(request: web.Request, key: str, default: float, allowed: str) -> float:
     """The finite number ``key`` of the query, or ``default``; 400 naming it otherwise."""
     raw = request.query.get(key)
     if raw is None:
@@ -237,7 +237,7 @@ class WebPage:
             if self.hub.latest(name) is None:
                 raise web.HTTPNotFound(text=f"no device {name!r}\n")
             raise web.HTTPNotFound(text="this gateway keeps no history ([web] history_s = 0)\n")
-        seconds = _query_number(request, "seconds", past.history_s, f"0 < seconds <= {past.history_s:g}")
+        seconds = query_number(request, "seconds", past.history_s, f"0 < seconds <= {past.history_s:g}")
         if seconds <= 0.0:
             raise web.HTTPBadRequest(text=f"seconds: {seconds!r} is out of range; allowed: 0 < seconds\n")
         points = past.points(min(seconds, past.history_s))
@@ -252,17 +252,18 @@ class WebPage:
                 raise web.HTTPNotFound(text=f"no device {name!r}\n")
             raise web.HTTPNotFound(text="this gateway keeps no readings to export ([web] export_s = 0)\n")
         newest = past.newest_s()
-        to_s = _query_number(
+        to_s = query_number(
             request, "to_s", newest if newest is not None else time.time(), "a Unix time in s"
         )
-        from_s = _query_number(request, "from_s", to_s - EXPORT_DEFAULT_S, "a Unix time in s")
+        from_s = query_number(request, "from_s", to_s - EXPORT_DEFAULT_S, "a Unix time in s")
         if from_s > to_s:
             raise web.HTTPBadRequest(
                 text=f"from_s ({from_s:g}) is after to_s ({to_s:g}); allowed: from_s <= to_s\n"
             )
         # a worker thread writes it (up to a million readings): the loop keeps serving streams
         loop = asyncio.get_running_loop()
-        text = await loop.run_in_executor(None, self.export_csv, name, past.export(from_s, to_s))
+        chosen, write = past.export(from_s, to_s), self.export_csv
+        text = await loop.run_in_executor(None, lambda: write(name, past.snapshots(chosen)))
         return web.Response(
             body=text.encode(),
             headers={"Content-Type": "text/csv; charset=utf-8",

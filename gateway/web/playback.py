@@ -17,7 +17,10 @@ the page shows the error per channel.
   Content-Security-Policy);
 * ``/api/devices`` and ``/api/devices/{name}``: the recorded device's layout, as live, with
   ``playback`` set (the page switches to its playback controls on it);
-* ``/api/playback``: every frame at once, with the record's time span (s).
+* ``/api/playback``: every frame at once, with the record's time span (s);
+* ``/api/devices/{name}/export.csv?from_s=A&to_s=B``: the record's own rows with times from A
+  to B (s, the frames' ``t``; default the whole record) in the record format, written by the
+  ``export_csv`` the command gives (404 without one).
 
 A record of more than ``MAX_FRAMES`` device samples is thinned to every k-th sample (the
 last one kept), so the page never receives more than that many frames.
@@ -25,9 +28,10 @@ last one kept), so the page never receives more than that many frames.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NotRequired
 
@@ -37,7 +41,7 @@ from aiohttp import web
 from ..runtime.counters import DeviceCounters
 from ..runtime.frame import DECIMALS, compact_json, rounded_roi
 from ..runtime.snapshot import DeviceSnapshot, finite_or_none
-from .app import PageFiles
+from .app import PageFiles, query_number
 from .frames import DeviceDescription, PageFrame, layout_json, roi_json
 
 #: The most frames a playback sends to the page (about 12 MB of JSON for 16 channels).
@@ -64,6 +68,8 @@ class Playback:
     source: str = ""
     samples_total: int = 0  # device samples in the record (``len(frames)`` unless thinned)
     info: dict[str, Any] = field(default_factory=dict)
+    #: ``export_csv(from_s, to_s)``: the record's rows between two times as CSV text
+    export_csv: Callable[[float, float], str] | None = None
 
 
 def thin(n_samples: int, max_frames: int = MAX_FRAMES) -> list[int]:
@@ -195,6 +201,7 @@ class PlaybackPage:
         r.add_get("/api/devices", self._devices)
         r.add_get("/api/devices/{name}", self._device)
         r.add_get("/api/playback", self._frames)
+        r.add_get("/api/devices/{name}/export.csv", self._export)
 
     async def _devices(self, request: web.Request) -> web.Response:
         return _json({
@@ -207,6 +214,24 @@ class PlaybackPage:
         if request.match_info["name"] != self._entry["name"]:
             raise web.HTTPNotFound()
         return _json(self._entry)
+
+    async def _export(self, request: web.Request) -> web.Response:
+        p = self.playback
+        if request.match_info["name"] != self._entry["name"] or p.export_csv is None:
+            raise web.HTTPNotFound()
+        to_s = query_number(request, "to_s", p.end_s, "a time of the record in s")
+        from_s = query_number(request, "from_s", p.start_s, "a time of the record in s")
+        if from_s > to_s:
+            raise web.HTTPBadRequest(
+                text=f"from_s ({from_s:g}) is after to_s ({to_s:g}); allowed: from_s <= to_s\n"
+            )
+        text = await asyncio.get_running_loop().run_in_executor(None, p.export_csv, from_s, to_s)
+        name = self._entry["name"]
+        return web.Response(
+            body=text.encode(),
+            headers={"Content-Type": "text/csv; charset=utf-8",
+                     "Content-Disposition": f'attachment; filename="{name}.csv"'},
+        )  # fmt: skip
 
     async def _frames(self, request: web.Request) -> web.Response:
         return web.Response(body=self._frames_body, headers={"Content-Type": "application/json"})

@@ -45,7 +45,10 @@ def test_the_hub_keeps_the_last_history_s_of_summaries() -> None:
     kept = history.export(1000.0, 2000.0)
     assert [s.timestamp_s for s in kept] == [1014.5 + 0.5 * k for k in range(11)]
     assert [s.timestamp_s for s in history.export(1015.2, 1016.0)] == [1015.5, 1016.0]
-    assert kept[0].static_estimate is None and kept[0].rois == ()  # slim: readings only
+    snaps = history.snapshots(kept)  # as the recorder reads them: slim, each poll's own values
+    assert [s.timestamp_s for s in snaps] == [r.timestamp_s for r in kept]
+    assert snaps[0].static_estimate is None and snaps[0].rois == () and snaps[0].up
+    assert snaps[0].channel_names == ("ch00", "ch01", "ch02", "ch03")
 
 
 def test_a_failed_poll_is_not_a_point_and_nothing_is_kept_when_off() -> None:
