@@ -90,6 +90,33 @@ def test_rois_are_read_from_names_indices_and_ranges() -> None:
     assert parse(with_device("")).buses[0].devices[0].rois == ()
 
 
+HAND = """\
+[[bus]]
+name = "hand"
+kind = "tcp"
+host = "127.0.0.1"
+port = 6000
+
+[[bus.device]]
+name = "hand"
+device_id = 1
+profile = "dexhand-1062"
+"""
+
+
+def test_a_region_or_group_name_selects_its_taxels() -> None:
+    """On a device made of regions, ``channels = ["palm"]`` is every taxel of region palm (the
+    dexhand-1062 profile: 112 taxels from channel 950), a group's name each of its regions."""
+    text = HAND + '[[bus.device.roi]]\nname = "palm"\nchannels = ["palm"]\n'
+    text += '[[bus.device.roi]]\nname = "tip"\nchannels = ["index-tip", "palm-r0c0"]\n'
+    dev = parse(text).buses[0].devices[0]
+    palm = next(r for r in dev.regions if r.name == "palm")
+    tip = next(r for r in dev.regions if r.name == "index-tip")
+    assert dev.rois[0].channels == tuple(range(palm.first_channel, palm.first_channel + palm.n_channels))
+    assert len(dev.rois[0].channels) == 112
+    assert dev.rois[1].channels == (*range(tip.first_channel, tip.first_channel + 9), palm.first_channel)
+
+
 @pytest.mark.parametrize(
     ("roi", "message"),
     [
