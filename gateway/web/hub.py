@@ -228,6 +228,9 @@ class FrameHub:
             batch = list(self._inbox)
             self._inbox.clear()
             self._wake_pending = False
+            gone = [name for name in self._history if name not in self._latest]
+        for name in gone:  # a device a reload removed: its past goes with it
+            del self._history[name]
         skip = {name: n - self.stream_capacity for name, n in Counter(n for n, _ in batch).items()}
         for name, entry in batch:
             if self.history_s > 0 or self.export_s > 0:
@@ -254,7 +257,10 @@ class FrameHub:
         if self.latest(device) is None:
             self._history.pop(device, None)  # a device a reload removed
             return None
-        return self._history.setdefault(device, DeviceHistory(self.history_s, self.export_s))
+        past = self._history.get(device)
+        if past is None:
+            past = self._history[device] = DeviceHistory(self.history_s, self.export_s)
+        return past
 
     def open_stream(self, device: str, wakeup: Wakeup = _noop) -> StreamQueue:
         """A new stream client of ``device``: it gets every poll from the next one on."""

@@ -83,3 +83,14 @@ def test_history_memory_is_bounded_whatever_the_poll_rate() -> None:
 def test_spans_out_of_range_are_refused(history_s: float, export_s: float) -> None:
     with pytest.raises(ValueError, match="allowed"):
         DeviceHistory(history_s, export_s)
+
+
+def test_a_device_a_reload_removes_takes_its_past_with_it() -> None:
+    hub = attached(history_s=10.0, export_s=5.0)
+    hub.on_snapshot(gateway(device("arr", t=1000.0), device("other", t=1000.0)))
+    assert set(hub._history) == {"arr", "other"}
+    hub.on_snapshot(gateway(device("arr", t=1001.0)))  # "other" is gone, never asked for
+    assert set(hub._history) == {"arr"}
+    assert hub.history("other") is None
+    past = hub.history("arr")
+    assert past is not None and [p.t for p in past.points(10.0)] == [1000.0, 1001.0]
