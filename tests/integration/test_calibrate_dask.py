@@ -15,6 +15,8 @@ from distributed import LocalCluster
 from gateway.cli import main
 from sim_device import ArrayConfig, record_offline
 
+pytestmark = pytest.mark.slow  # starts a scheduler and two worker processes
+
 SHORT = ["--model", "auto", "--objective", "log-r", "--force-offset", "none", "--no-progress"]
 
 
