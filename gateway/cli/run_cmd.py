@@ -85,6 +85,16 @@ _log_level = click.option(
 
 
 # --------------------------------------------------------------------------- run
+def _export(config: GatewayConfig, name: str, snapshots: Sequence[DeviceSnapshot]) -> str:
+    """The page's export of ``name``'s ``snapshots``: a record, as ``record`` writes it."""
+    from ..analysis.recorder import export_record  # the page's export only: not at start-up
+
+    meta = {"source": f"tactile-gateway export of {name}"}
+    if config.source is not None:
+        meta["config"] = os.path.abspath(config.source)  # view finds it (# config:)
+    return export_record(config, name, snapshots, meta)
+
+
 def _page(
     holder: SnapshotHolder,
     config: GatewayConfig,
@@ -106,12 +116,7 @@ def _page(
             return []
 
     def export_csv(name: str, snapshots: Sequence[DeviceSnapshot]) -> str:
-        from ..analysis.recorder import export_record  # the page's export only: not at start-up
-
-        meta = {"source": f"tactile-gateway export of {name}"}
-        if current[0].source is not None:
-            meta["config"] = os.path.abspath(current[0].source)  # view finds it (# config:)
-        return export_record(current[0], name, snapshots, meta)
+        return _export(current[0], name, snapshots)
 
     return WebPage(
         FrameHub(holder, history_s=config.web.history_s, export_s=config.web.export_s),
@@ -451,9 +456,10 @@ async def run_demo(port: int, host: str, duration_s: float | None, out: TextIO) 
                     host,
                     port,
                     install=WebPage(
-                        FrameHub(holder),
+                        FrameHub(holder, history_s=config.web.history_s, export_s=config.web.export_s),
                         device_configs=lambda: [device],
                         what_is_on=lambda _name: device_summary(device),
+                        export_csv=lambda name, snapshots: _export(config, name, snapshots),
                     ).install,
                 ).start()
             except OSError as exc:
