@@ -171,34 +171,49 @@ class _Gateway:
 
     async def start(self, broker_port: int) -> Poller:
         self.task = asyncio.create_task(run_cmd.serve(self.path, self.config, None, True))
-        deadline = time.monotonic() + 60.0
-        while not _Captured.made or not _snapshot_up(_Captured.made[-1].holder.get()):
-            if self.task.done() or time.monotonic() > deadline:
-                raise RuntimeError(f"the gateway did not poll the hand: {self.task}")
-            await asyncio.sleep(0.05)
-        self.poller = _Captured.made[-1]
-        self.poller.workers[0].sleep = _timed_sleep
-        metrics = self.config.metrics
-        self.recorder = await asyncio.create_subprocess_exec(
-            str(Path(sys.executable).parent / "tactile-gateway"), "subscribe",
-            "--broker", f"127.0.0.1:{broker_port}", "--out", str(self.record), "--quiet",
-            "--session-expiry", "0",
-            stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
-        )  # fmt: skip
-        fox = self.config.foxglove
-        assert fox is not None
-        self.clients = await asyncio.create_subprocess_exec(
-            sys.executable, "-c", CLIENTS_SCRIPT, f"http://{metrics.host}:{metrics.port}", str(fox.port),
-            str(TOPICS), stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
-        )  # fmt: skip
-        self.others.update(recorder=self.recorder.pid, clients=self.clients.pid)
-        for pid in (self.recorder.pid, self.clients.pid):
-            os.setpriority(os.PRIO_PROCESS, pid, CONSUMER_NICE)
-        assert self.clients.stdout is not None
-        line = await asyncio.wait_for(self.clients.stdout.readline(), timeout=60)
-        if line.strip() != b"ready":
-            raise RuntimeError(f"the clients did not connect: {line!r}")
-        return self.poller
+        try:
+            deadline = time.monotonic() + 60.0
+            while not _Captured.made or not _snapshot_up(_Captured.made[-1].holder.get()):
+                if self.task.done() or time.monotonic() > deadline:
+                    raise RuntimeError(f"the gateway did not poll the hand: {self.task}")
+                await asyncio.sleep(0.05)
+            self.poller = _Captured.made[-1]
+            self.poller.workers[0].sleep = _timed_sleep
+            metrics = self.config.metrics
+            self.recorder = await asyncio.create_subprocess_exec(
+                str(Path(sys.executable).parent / "tactile-gateway"), "subscribe",
+                "--broker", f"127.0.0.1:{broker_port}", "--out", str(self.record), "--quiet",
+                "--session-expiry", "0",
+                stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
+            )  # fmt: skip
+            fox = self.config.foxglove
+            assert fox is not None
+            self.clients = await asyncio.create_subprocess_exec(
+                sys.executable, "-c", CLIENTS_SCRIPT, f"http://{metrics.host}:{metrics.port}", str(fox.port),
+                str(TOPICS), stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            )  # fmt: skip
+            self.others.update(recorder=self.recorder.pid, clients=self.clients.pid)
+            for pid in (self.recorder.pid, self.clients.pid):
+                os.setpriority(os.PRIO_PROCESS, pid, CONSUMER_NICE)
+            assert self.clients.stdout is not None
+            line = await asyncio.wait_for(self.clients.stdout.readline(), timeout=60)
+            if line.strip() != b"ready":
+                raise RuntimeError(f"the clients did not connect: {line!r}")
+            return self.poller
+        except BaseException:
+            await self._abort()
+            raise
+
+    async def _abort(self) -> None:
+        """After a failed start: end whatever was started (``run`` by cancelling it: its signal
+        handlers may not be in place yet)."""
+        for proc in (self.clients, self.recorder):
+            if proc is not None and proc.returncode is None:
+                proc.kill()
+                await proc.wait()
+        if self.task is not None and not self.task.done():
+            self.task.cancel()
+            await asyncio.gather(self.task, return_exceptions=True)
 
     async def stop(self) -> tuple[dict[str, int], int, str]:
         """Stop everything; what the clients received, the frames recorded, the recorder's notes."""
@@ -212,7 +227,8 @@ class _Gateway:
             _, err = await asyncio.wait_for(self.recorder.communicate(), timeout=60)
             notes = err.decode(errors="replace")
         if self.task is not None:
-            os.kill(os.getpid(), signal.SIGTERM)  # `run` stops on SIGTERM
+            if not self.task.done():
+                os.kill(os.getpid(), signal.SIGTERM)  # `run` stops on SIGTERM
             if await asyncio.wait_for(self.task, timeout=30) != 0:
                 raise RuntimeError("the gateway did not stop cleanly")
         return counts, _recorded_messages(self.record), notes

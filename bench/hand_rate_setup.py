@@ -61,10 +61,12 @@ import asyncio, json, sys
 import aiohttp
 
 counts = {"foxglove": 0, "page": 0, "stream": 0, "scrapes": 0}
+sockets = []  # closed first at the end: the server sees a goodbye, not a reset
 
 async def foxglove(session, port, ready):
     async with session.ws_connect(f"ws://127.0.0.1:{port}", protocols=["foxglove.sdk.v1"],
                                   max_msg_size=0) as ws:
+        sockets.append(ws)
         channels = {}
         while len(channels) < int(sys.argv[3]):
             body = json.loads((await ws.receive()).data)
@@ -105,6 +107,8 @@ async def main():
         await asyncio.wait_for(asyncio.gather(*ready), 60)
         print("ready", flush=True)
         await loop.run_in_executor(None, sys.stdin.read)
+        for ws in sockets:
+            await ws.close()
         for t in tasks:
             t.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
