@@ -2,9 +2,9 @@
 chromium, headless, via Playwright): a rectangle dragged on the map selects the cells whose
 centres it holds; the region's sum, peak, contact area and centre of pressure equal those over
 its cells in the frame JSON; regions persist in the URL; regions named in the configuration
-(the frame's ``rois``) are listed with the gateway's figures. The CSV buttons ask the gateway's
-export for the frame or the chart's span; the PNG button saves the map with its key. Writes
-screenshots when asked (``make screenshots``)."""
+(the frame's ``rois``) are listed with the gateway's figures. The CSV buttons download the
+gateway's export of the frame or the chart's span (read back as records); the PNG button saves
+the map with its key. Writes screenshots when asked (``make screenshots``)."""
 
 from __future__ import annotations
 
@@ -157,29 +157,6 @@ async def test_regions_named_in_the_configuration_are_listed(browser: Any) -> No
 # ---------------------------------------------------------------- 6. export
 
 
-async def test_csv_buttons_ask_the_gateways_export_for_the_frame_and_the_span(browser: Any) -> None:
-    async with steady_page(DEMO_FORCES) as server:
-        t = frame_json(server.base_url)["t"]
-        page, errors = await open_page(browser, server.base_url + "/")
-        # each button starts a download of the gateway's export: its URL is checked (the
-        # export itself is the gateway's, tested with it)
-        asked: list[str] = []
-        for button in ("#export-frame-csv", "#export-span-csv"):
-            async with page.expect_download() as got:
-                await page.click(button)
-            asked.append((await got.value).url)
-        frame_q = urllib.parse.parse_qs(urllib.parse.urlparse(asked[0]).query)
-        span_q = urllib.parse.parse_qs(urllib.parse.urlparse(asked[1]).query)
-        # the frame: a window of its own time; the span: the chart's 30 s up to the newest frame
-        assert float(frame_q["from_s"][0]) == pytest.approx(t) and float(frame_q["to_s"][0]) == pytest.approx(
-            t
-        )
-        assert float(span_q["to_s"][0]) == pytest.approx(t)
-        assert float(span_q["from_s"][0]) == pytest.approx(t - 30)
-        await page.close()
-    assert errors == [], errors
-
-
 async def test_the_png_button_saves_the_map_with_its_key(browser: Any, tmp_path: Path) -> None:
     from PIL import Image
 
@@ -205,5 +182,69 @@ async def test_the_png_button_saves_the_map_with_its_key(browser: Any, tmp_path:
         colours = right.getcolors(maxcolors=1 << 20) or []
         assert any(r > 240 and g > 240 and 140 < b < 190 for _n, (r, g, b) in colours)
         (tmp_path / "export.png").write_bytes(data)
+        await page.close()
+    assert errors == [], errors
+
+
+async def test_a_real_gateway_fills_the_chart_and_exports_the_frame(browser: Any, tmp_path: Path) -> None:
+    """The simulated array polled for a while by a gateway keeping a history and readings to
+    export: the page's chart starts with the gateway's past, and "this frame" downloads a CSV
+    that reads back as a record with every channel."""
+    from web_fixtures import gateway_with_page
+
+    from gateway.analysis.records import read_record
+
+    async with gateway_with_page(history_s=60.0, export_s=60.0) as gw:
+
+        def kept() -> int:
+            past = gw.hub.history("arr")
+            return 0 if past is None else len(past.points(60.0))
+
+        await until_async(_async(lambda: kept() >= 20), 20, "20 polls in the gateway's history")
+        before = kept()
+        page, errors = await open_page(browser, gw.server.base_url + "/")
+
+        async def filled() -> bool:
+            h = await page.evaluate("() => document.getElementById('history').dataset.source")
+            return h == "server"
+
+        await until_async(filled, 10, "the chart filled from the gateway's history")
+        points = int(await page.evaluate("() => document.getElementById('history').dataset.points"))
+        assert points >= before, (points, before)
+        async with page.expect_download() as got:
+            await page.click("#export-frame-csv")
+        download = await got.value
+        path = tmp_path / "frame.csv"
+        await download.save_as(path)
+        record = await asyncio.to_thread(read_record, path)
+        assert len(record.channels) == 16, list(record.channels)
+        # the frame: a window of its own time; the span: the chart's 30 s up to the frame
+        frame_q = urllib.parse.parse_qs(urllib.parse.urlparse(download.url).query)
+        assert float(frame_q["to_s"][0]) - float(frame_q["from_s"][0]) == pytest.approx(2e-5, abs=1e-6)
+        assert len(next(iter(record.channels.values())).time_s) == 1, "one frame's readings"
+        async with page.expect_download() as got:
+            await page.click("#export-span-csv")
+        span = await got.value
+        span_q = urllib.parse.parse_qs(urllib.parse.urlparse(span.url).query)
+        assert float(span_q["to_s"][0]) - float(span_q["from_s"][0]) == pytest.approx(30.0)
+        await span.save_as(tmp_path / "span.csv")
+        span_record = await asyncio.to_thread(read_record, tmp_path / "span.csv")
+        assert len(span_record.channels) == 16
+        await page.close()
+    assert errors == [], errors
+
+
+def _async(cond: Any) -> Any:
+    async def run() -> bool:
+        return bool(cond())
+
+    return run
+
+
+async def test_the_csv_buttons_are_off_without_readings_to_export(browser: Any) -> None:
+    async with steady_page(DEMO_FORCES) as server:  # a gateway with export_s = 0
+        page, errors = await open_page(browser, server.base_url + "/")
+        await until_async(lambda: page.is_disabled("#export-frame-csv"), 5, "the CSV button off")
+        assert await page.is_disabled("#export-span-csv") and await page.is_enabled("#export-png")
         await page.close()
     assert errors == [], errors

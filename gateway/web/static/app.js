@@ -464,6 +464,7 @@ function render() {
       placeAxes(d, $("map"), 12);
       updateSums(d);
       updateRois(d);
+      showExport(d);
       updateStatusWords(d.frame);
       drawHistory($("history"), d);
       updateText(d, now);

@@ -39,7 +39,8 @@ async function loadHistory(d) {
   d.historySource = "loading";
   try {
     const name = encodeURIComponent(d.layout.name);
-    const resp = await fetch(`/api/devices/${name}/history?seconds=${HISTORY_S}`, { cache: "no-store" });
+    const seconds = Math.min(HISTORY_S, d.layout.history_s); // the gateway refuses more than it keeps
+    const resp = await fetch(`/api/devices/${name}/history?seconds=${seconds}`, { cache: "no-store" });
     if (!resp.ok) { d.historySource = "none"; return; }
     const data = await resp.json();
     const first = d.history.length ? d.history[0].t : Infinity;

@@ -15,6 +15,7 @@
 const ROI_COLOUR = "#5fb3ff";
 const ROI_CONFIGURED_COLOUR = "#f5a623";
 const DRAG_MIN_PX = 6;
+const FRAME_WINDOW_S = 1e-5;
 
 // ?roi=name:4,5,8,9 (repeated) -> [{name, cells}]
 function readRois(q) {
@@ -211,13 +212,26 @@ function download(href, filename) {
 }
 
 // the gateway's CSV (the record format) from from_s to to_s (s, the frames' clock)
+// a live gateway that keeps no readings to export (export_s = 0 in the device's entry) has
+// its CSV buttons disabled (playback's entry has no export_s: its record is there to export)
+function showExport(d) {
+  const none = d.layout.export_s === 0;
+  $("export-frame-csv").disabled = none;
+  $("export-span-csv").disabled = none;
+  $("export-frame-csv").title = none ? "this gateway keeps no readings to export ([web] export_s = 0)"
+    : "the shown frame, from the gateway's export";
+}
+
 function exportCsv(span) {
   const d = selected && devices.get(selected);
   if (!d || !d.frame) return;
   const t = d.frame.t;
-  const from = span ? (playback ? Math.max(playback.start, t - HISTORY_S) : t - HISTORY_S) : t;
+  // the frame's time is rounded to the microsecond: its own poll lies within 10 us of it,
+  // and polls are milliseconds apart
+  const to = span ? t : t + FRAME_WINDOW_S;
+  const from = span ? (playback ? Math.max(playback.start, t - HISTORY_S) : t - HISTORY_S) : t - FRAME_WINDOW_S;
   const name = encodeURIComponent(d.layout.name);
-  download(`/api/devices/${name}/export.csv?from_s=${from}&to_s=${t}`, `${d.layout.name}.csv`);
+  download(`/api/devices/${name}/export.csv?from_s=${from}&to_s=${to}`, `${d.layout.name}.csv`);
 }
 
 // the map with its key and the key's words beside it, as a PNG file
