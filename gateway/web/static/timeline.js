@@ -97,7 +97,9 @@ function drawHistory(canvas, d) {
   ctx.textBaseline = "middle";
   ctx.textAlign = "left";
   const what = view.unit === "N" ? "total and peak force (N" : `mean and peak pressure (${u}`;
-  ctx.fillText(`${what}, left) and contact area (mm², right), last ${HISTORY_S} s`, l, 10);
+  // a narrow chart (a phone) gets the short title: the key under it names the lines
+  ctx.fillText(w >= 600 ? `${what}, left) and contact area (mm², right), last ${HISTORY_S} s`
+    : `${view.unit === "N" ? "force, N" : `pressure, ${u}`} · area, mm²`, l, 10);
   ctx.fillText("centre of pressure, x and y (mm)", l, t2 - 10);
   ctx.textAlign = "right";
   ctx.fillText(fmtValue(fTop), l - 6, t);
