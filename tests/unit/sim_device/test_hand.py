@@ -291,7 +291,7 @@ def test_rest_offsets_are_each_taxels_own_and_fixed() -> None:
     h = HandDevice("idle", clock=clock, noise_lsb=0.0, rest_offset_lsb=150.0, seed=3)
     first = np.concatenate([h.taxels(r.name) for r in hm.REGIONS])
     # uniform in 0..300 over 1,062 taxels: mean 150 +- 3 standard errors (86.6 / sqrt(1062) = 2.7)
-    assert 0 <= first.min() and first.max() <= 300
+    assert first.min() >= 0 and first.max() <= 300
     assert abs(first.mean() - 150.0) < 8.1
     assert len(np.unique(first)) > 250  # each its own
     clock.now_s = 2.0
