@@ -183,6 +183,8 @@ async def test_playback_steps_loops_marks_and_compares_two_frames(browser: Any, 
         # the wording is playback's, not live's
         assert "playback" in (await text(page, "#health-title")).lower()
         assert (await text(page, "#history-range")).startswith("record 0.00 s")
+        title = await page.evaluate("document.getElementById('history').getAttribute('aria-label')")
+        assert title.endswith("the 30 s of the record up to the frame") and "last 30 s" not in title, title
         # frame steps: the buttons and the arrow keys
         assert await _frame(page) == "1"
         await page.click("#step-fwd")

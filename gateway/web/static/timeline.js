@@ -98,7 +98,10 @@ function drawHistory(canvas, d) {
   ctx.textAlign = "left";
   const what = view.unit === "N" ? "total and peak force (N" : `mean and peak pressure (${u}`;
   // a narrow chart (a phone) gets the short title: the key under it names the lines
-  ctx.fillText(w >= 600 ? `${what}, left) and contact area (mm², right), last ${HISTORY_S} s`
+  const span = playback ? `the ${HISTORY_S} s of the record up to the frame` : `last ${HISTORY_S} s`;
+  const title = `${what}, left) and contact area (mm², right), ${span}`;
+  canvas.setAttribute("aria-label", title);
+  ctx.fillText(w >= 600 ? title
     : `${view.unit === "N" ? "force, N" : `pressure, ${u}`} · area, mm²`, l, 10);
   ctx.fillText("centre of pressure, x and y (mm)", l, t2 - 10);
   ctx.textAlign = "right";
