@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from gateway.config import parse_config
+from gateway.config import DeviceConfig, parse_config
 from gateway.modbus.image import RegisterImage, decode_sample
 from gateway.runtime.dead_taxels import DeadTaxelTracker, tracker_for
 from gateway.runtime.processor import DeviceProcessor
@@ -74,10 +74,11 @@ def _per_poll_us(step: object, n_images: int) -> float:
     return 1e6 * (time.perf_counter() - start) / polls
 
 
-def bench_drift_corrected() -> None:
-    device = parse_config(HAND_DRIFT).buses[0].devices[0]
-    first = device.regions[0].address
-    images = _images(device.n_channels, first)
+def _poll_us(config: str) -> tuple[float, DeviceConfig, DeviceProcessor, list[RegisterImage]]:
+    """The time of one poll (decode + ``process``, us) of the hand ``config`` describes, with
+    the device, its processor and the polled images."""
+    device = parse_config(config).buses[0].devices[0]
+    images = _images(device.n_channels, device.regions[0].address)
     processor = DeviceProcessor(device, "hand", 1.0 / 30.0)
     state = [processor.initial_state()]
     clock = [100.0]
@@ -87,32 +88,29 @@ def bench_drift_corrected() -> None:
         raw = decode_sample(device, images[k])
         _, state[0] = processor.process(state[0], raw, 1.7e9 + clock[0], clock[0])
 
-    us = _per_poll_us(step, len(images))
-    verdict = "ok" if us <= GOAL_US else "SLOWER than the goal"
+    return _per_poll_us(step, len(images)), device, processor, images
+
+
+def _verdict(us: float) -> str:
+    return (
+        f"{us:8.1f} us/poll (goal <= {GOAL_US:.0f} us: {'ok' if us <= GOAL_US else 'SLOWER than the goal'})"
+    )
+
+
+def bench_drift_corrected() -> None:
+    us, _, _, _ = _poll_us(HAND_DRIFT)
     print(
-        f"  the same poll read in ohm with drift correction (the model with creep on every taxel): "
-        f"{us:8.1f} us/poll (goal <= {GOAL_US:.0f} us: {verdict})"
+        "  the same poll read in ohm with drift correction (the model with creep on every taxel): "
+        + _verdict(us)
     )
 
 
 def bench_conversion() -> None:
-    device = parse_config(HAND).buses[0].devices[0]
-    first = device.regions[0].address
-    images = _images(device.n_channels, first)
-    processor = DeviceProcessor(device, "hand", 1.0 / 30.0)
-    state = [processor.initial_state()]
+    us, device, processor, images = _poll_us(HAND)
     clock = [100.0]
-
-    def step(k: int) -> None:
-        clock[0] += 1.0 / 30.0
-        raw = decode_sample(device, images[k])
-        _, state[0] = processor.process(state[0], raw, 1.7e9 + clock[0], clock[0])
-
-    us = _per_poll_us(step, len(images))
-    verdict = "ok" if us <= GOAL_US else "SLOWER than the goal"
     print(
         f"  one {device.n_channels}-channel poll ({len(device.regions)} regions), decode + conversion + "
-        f"special codes + dead taxels: {us:8.1f} us/poll (goal <= {GOAL_US:.0f} us: {verdict})"
+        f"special codes + dead taxels: {_verdict(us)}"
     )
     decode_us = _per_poll_us(lambda k: decode_sample(device, images[k]), len(images))
     print(f"  of which decoding the 17 blocks and their special codes: {decode_us:8.1f} us/poll")

@@ -269,13 +269,12 @@ def held_snapshots(
     fixed = {f.name: getattr(template, f.name) for f in fields(DeviceSnapshot) if f.init}
     empty = np.zeros(0)
     no_static = (), empty, None, np.zeros(0, dtype=bool), empty
-    q = _quantities(force, status, processor.x_mm, processor.y_mm)
-    area_mm2 = _contact_areas(force, status, processor.cell_areas_mm2)
+    q = _quantities(force, status, processor.x_mm, processor.y_mm, processor.cell_areas_mm2)
     names = processor.names
     rois = roi_slots(processor.device.rois, processor.index)
     out: list[DeviceSnapshot] = []
     columns = zip(run.sample_time_s[chosen].tolist(), *(a.tolist() for a in q), strict=True)
-    for i, (t, total, x, y, n_contact, peak) in enumerate(columns):
+    for i, (t, total, x, y, n_contact, peak, area_mm2) in enumerate(columns):
         fixed.update(
             resistance_ohm=read_only(resistance[i]),
             force_n=read_only(force[i]),
@@ -288,7 +287,7 @@ def held_snapshots(
             total_force_n=total,
             center_of_pressure_mm=None if n_contact == 0 else (x, y),
             channels_in_contact=n_contact,
-            contact_area_mm2=float(area_mm2[i]),
+            contact_area_mm2=area_mm2,
             peak_channel=None if n_contact == 0 else names[peak],
             peak_force_n=None if n_contact == 0 else float(force[i, peak]),
             temperature_c=read_only(temperature[i]) if has_temperature else None,
@@ -300,26 +299,26 @@ def held_snapshots(
     return out, n_samples
 
 
-def _contact_areas(
-    force_n: FloatArray, status: NDArray[np.int8], cell_area_mm2: float | FloatArray
-) -> FloatArray:
-    """The contact area (mm^2) of each row: the cells in contact, each of its own area."""
-    contact = IN_CONTACT[status] & (force_n > 0.0)
-    if isinstance(cell_area_mm2, float):
-        return np.asarray(np.count_nonzero(contact, axis=1) * cell_area_mm2, dtype=np.float64)
-    return np.asarray(contact.astype(np.float64) @ cell_area_mm2, dtype=np.float64)
-
-
 def _quantities(
-    force_n: FloatArray, status: NDArray[np.int8], x_mm: FloatArray, y_mm: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray]:
+    force_n: FloatArray,
+    status: NDArray[np.int8],
+    x_mm: FloatArray,
+    y_mm: FloatArray,
+    cell_area_mm2: float | FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray, IntArray, IntArray, FloatArray]:
     """``snapshot.array_quantities`` of each row of (samples, channels) forces and statuses:
     total force (N), centre of pressure x and y (mm; NaN with nothing in contact), channels in
-    contact and the peak channel's position (0 with nothing in contact)."""
+    contact, the peak channel's position (0 with nothing in contact) and the contact area
+    (mm^2: the cells in contact, each of its own area)."""
     contact = IN_CONTACT[status] & (force_n > 0.0)  # NaN is never > 0
     fc = np.where(contact, force_n, 0.0)
     total = fc.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         x = (fc @ x_mm) / total
         y = (fc @ y_mm) / total
-    return total, x, y, np.count_nonzero(contact, axis=1), fc.argmax(axis=1)
+    n_contact = np.count_nonzero(contact, axis=1)
+    if isinstance(cell_area_mm2, float):
+        area = np.asarray(n_contact * cell_area_mm2, dtype=np.float64)
+    else:
+        area = np.asarray(contact.astype(np.float64) @ cell_area_mm2, dtype=np.float64)
+    return total, x, y, n_contact, fc.argmax(axis=1), area

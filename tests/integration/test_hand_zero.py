@@ -14,15 +14,14 @@ what it read before (its load was not zeroed away)."""
 
 from __future__ import annotations
 
-import asyncio
 import random
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from test_hand_gateway import OFFSET, configuration
+from test_tare_moving_load_sim import run_tare
 
 from gateway.config import load_config
 from gateway.runtime.poller import Poller
@@ -33,7 +32,6 @@ from sim_device.hand_server import serve_hand_tcp
 
 pytestmark = pytest.mark.slow
 
-CLI = Path(sys.executable).parent / "tactile-gateway"
 #: The simulator's read-out: raw = 65535 x 1 kohm / r (docs/register-map-hand.md).
 FRONT_END = """
 [bus.device.front_end]
@@ -55,21 +53,6 @@ async def poll_once(path: Path) -> DeviceSnapshot:
     snap = poller.snapshot().devices["hand"]
     assert snap.up, snap.error
     return snap
-
-
-async def run_tare(path: Path, *options: str) -> tuple[int, str, str]:
-    proc = await asyncio.create_subprocess_exec(
-        str(CLI), "tare", "-c", str(path), *options,
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    try:
-        out, err = await asyncio.wait_for(proc.communicate(), timeout=180.0)
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
-    assert proc.returncode is not None
-    return proc.returncode, out.decode(), err.decode()
 
 
 async def test_a_zero_taken_while_the_palm_is_loaded_leaves_no_phantom_force(tmp_path: Path) -> None:

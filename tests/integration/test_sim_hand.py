@@ -10,8 +10,6 @@ import asyncio
 import os
 import re
 import sys
-import threading
-from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -25,18 +23,6 @@ from sim_device.hand_scenarios import parse_taxel_specs
 from sim_device.hand_server import serve_hand_tcp
 
 MAX_READ = 125
-
-
-@pytest.fixture(autouse=True)
-async def no_leaked_tasks() -> AsyncIterator[None]:
-    before = asyncio.all_tasks()
-    threads = threading.active_count()
-    yield
-    for _ in range(5):
-        await asyncio.sleep(0)
-    leaked = [t for t in asyncio.all_tasks() - before if t is not asyncio.current_task() and not t.done()]
-    assert not leaked, f"tasks left behind: {leaked}"
-    assert threading.active_count() == threads, "threads left behind"
 
 
 async def read_block(client: AsyncModbusTcpClient, address: int, count: int) -> tuple[list[int], int]:

@@ -13,6 +13,7 @@ import pytest
 from gateway.config import parse_config
 from gateway.errors import ConfigError
 from gateway.modbus.image import RawSample
+from gateway.model import SensorModel, SensorParams
 from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import ChannelStatus, DeviceSnapshot
 
@@ -77,9 +78,16 @@ def test_as_readings_the_open_rail_is_rest_on_an_uncalibrated_ratio_channel(tmp_
 def test_as_readings_the_open_rail_is_rest_and_the_short_rail_saturated_in_ohm(tmp_path: Path) -> None:
     snap = _snapshot(tmp_path, TRANSIMPEDANCE, "readings", [0, 0, 8400, FS])
     assert snap.status[0] == ChannelStatus.NO_CONTACT and snap.force_n[0] == 0.0
-    # 8400 counts: r = 65535 kohm / 8400 = 7.8 kohm, a load by the default model (a few N)
-    assert snap.resistance_ohm[2] == pytest.approx(65535 * 1000 / 8400, rel=1e-12)
-    assert 1.0 < snap.force_n[2] < 20.0
+    # 8400 counts: r = 65535 kohm / 8400 = 7.8 kohm, a load by the default model
+    r_ohm = 65535 * 1000 / 8400
+    assert snap.resistance_ohm[2] == pytest.approx(r_ohm, rel=1e-12)
+    # round trip: a fresh channel starts settled at its reading, so the default sensor settled
+    # at the force read gives back the reading's resistance
+    force_n = float(snap.force_n[2])
+    assert snap.status[2] == ChannelStatus.OK and force_n > 0.0
+    model = SensorModel("tunneling,contact,creep", [SensorParams()])
+    settled = model.settled_state(np.array([force_n]))
+    assert float(model.resistance(np.array([force_n]), settled)[0]) == pytest.approx(r_ohm, rel=1e-6)
     # full scale: more load than the converter resolves; its force is the model's top, flagged
     assert snap.status[3] == ChannelStatus.SATURATED
 
