@@ -63,6 +63,9 @@ STATIC_FILES: dict[str, str] = {
     "style.css": "text/css; charset=utf-8",
 }
 KEEPALIVE_S = 15.0
+#: polls reach the clients at most once in this (s); a frame waits at most this long, and only
+#: when polls come faster (see ``_Paced``)
+DRAIN_INTERVAL_S = 0.01
 #: a stream's write not taken by the client within this ends the stream (a stalled reader)
 WRITE_TIMEOUT_S = 10.0
 #: the span an export gives without ``from_s`` (s before ``to_s``)
@@ -75,6 +78,77 @@ ExportCsv = Callable[[str, Sequence[DeviceSnapshot]], str]
 STREAM_SEND_BUFFER_BYTES = 128 * 1024
 _SSE_HEADERS = {"Content-Type": "text/event-stream", "Cache-Control": "no-cache", "X-Accel-Buffering": "no"}
 _ENDED = (ConnectionError, RuntimeError)  # the client went away mid-write
+
+
+class _Paced:
+    """Runs the hub's hand-over (``FrameHub.drain``) on the server's loop at most once in
+    ``interval_s``: a poll that comes later than that after the last hand-over is handed
+    over at once; polls that come faster wait for the next one, together.
+
+    Each hand-over wakes the loop, every stream client and their writes; at hundreds of
+    polls a second doing it for each poll costs the poll loop a share of the interpreter.
+    The hub asks again only after a hand-over has run, so polls in between cost nothing here."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, interval_s: float) -> None:
+        self._loop = loop
+        self.interval_s = interval_s
+        self._last_s = -math.inf
+
+    def schedule(self, drain: Callable[[], None]) -> None:
+        """From any thread: run ``drain`` on the loop, now or at the interval's end."""
+        self._loop.call_soon_threadsafe(self._due, drain)
+
+    def _due(self, drain: Callable[[], None]) -> None:
+        wait_s = self._last_s + self.interval_s - self._loop.time()
+        if wait_s > 0:
+            self._loop.call_later(wait_s, self._run, drain)
+        else:
+            self._run(drain)
+
+    def _run(self, drain: Callable[[], None]) -> None:
+        self._last_s = self._loop.time()
+        drain()
+
+
+class _Wake:
+    """An event-stream client's wake-up: the hub sets it when a frame is offered (``set``),
+    and a timer sets it with ``keepalive_due`` once nothing was written for ``keepalive_s``.
+
+    The timer is one a client, re-armed only when it fires: a frame costs no timer or task
+    (``asyncio.wait_for`` costs both, about 30 us a frame a client, which at hundreds of
+    polls a second the poll loop pays in the interpreter's lock)."""
+
+    def __init__(self, keepalive_s: float) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._event = asyncio.Event()
+        self.keepalive_s = keepalive_s
+        self.keepalive_due = False
+        self._last_write_s = self._loop.time()
+        self._timer = self._loop.call_later(keepalive_s, self._tick)
+
+    def set(self) -> None:
+        self._event.set()
+
+    def wrote(self) -> None:
+        """A write went out: the keepalive's clock starts again."""
+        self._last_write_s = self._loop.time()
+        self.keepalive_due = False
+
+    async def wait(self) -> None:
+        """Until a frame is offered, the stream is closed or a keepalive is due."""
+        await self._event.wait()
+        self._event.clear()
+
+    def _tick(self) -> None:
+        idle_s = self._loop.time() - self._last_write_s
+        if idle_s >= self.keepalive_s:
+            self.keepalive_due = True
+            self._event.set()
+            idle_s = 0.0
+        self._timer = self._loop.call_later(self.keepalive_s - idle_s, self._tick)
+
+    def close(self) -> None:
+        self._timer.cancel()
 
 
 def _json(data: Any, status: int = 200) -> web.Response:
@@ -140,6 +214,8 @@ class WebPage:
         scale_max_n: float = 5.0,
         clock: Callable[[], float] = time.monotonic,
         write_timeout_s: float = WRITE_TIMEOUT_S,
+        keepalive_s: float = KEEPALIVE_S,
+        drain_interval_s: float = DRAIN_INTERVAL_S,
         device_configs: Callable[[], Iterable[DeviceDescription]] | None = None,
         what_is_on: Callable[[str], list[str]] | None = None,
         export_csv: ExportCsv | None = None,
@@ -154,6 +230,10 @@ class WebPage:
         #: frames do not carry: disabled channels and the layout's cell area
         self.device_configs = device_configs
         self.write_timeout_s = write_timeout_s
+        #: an idle event stream gets a comment line after this long without a write (s)
+        self.keepalive_s = keepalive_s
+        #: the hub hands polls to the clients at most once in this (s): see ``_Paced``
+        self.drain_interval_s = drain_interval_s
         #: streams ended because their client stopped reading
         self.stalled_total = 0
         self.max_fps = max_fps
@@ -177,7 +257,7 @@ class WebPage:
 
     # ------------------------------------------------------------------ lifecycle
     async def _attach(self, app: web.Application) -> None:
-        self.hub.attach(asyncio.get_running_loop().call_soon_threadsafe)
+        self.hub.attach(_Paced(asyncio.get_running_loop(), self.drain_interval_s).schedule)
 
     async def _close(self, app: web.Application) -> None:
         self.hub.close_all()
@@ -279,9 +359,21 @@ class WebPage:
         await self._write(resp, request, b"retry: 1000\n\n")
 
     async def _write(self, resp: web.StreamResponse, request: web.Request, chunk: bytes) -> None:
-        """Write, or end the stream (``ConnectionError``) if the client does not take it in time."""
+        """Write, or end the stream (``ConnectionError``) if the client does not take it in time.
+
+        A chunk that fits in the transport's buffer below its high-water mark cannot hold the
+        writer up (aiohttp waits only while the transport is paused, above that mark), so it is
+        written without a timer: at hundreds of frames a second a timer a write costs the poll
+        loop its share of the interpreter."""
+        transport = request.transport
+        if transport is not None and not transport.is_closing():
+            high_water = transport.get_write_buffer_limits()[1]
+            if transport.get_write_buffer_size() + len(chunk) <= high_water:
+                await resp.write(chunk)
+                return
         try:
-            await asyncio.wait_for(resp.write(chunk), self.write_timeout_s)
+            async with asyncio.timeout(self.write_timeout_s):
+                await resp.write(chunk)
         except TimeoutError:
             self.stalled_total += 1
             if request.transport is not None:
@@ -292,31 +384,34 @@ class WebPage:
         name = request.match_info["name"]
         if self.hub.latest(name) is None:
             raise web.HTTPNotFound()
-        wake = asyncio.Event()
+        wake = _Wake(self.keepalive_s)
         q = self.hub.open_stream(name, wake.set)
         resp = web.StreamResponse(headers=_SSE_HEADERS)
         try:
             await self._open_events(resp, request)
+            wake.wrote()
             while not q.closed:
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(wake.wait(), KEEPALIVE_S)
-                wake.clear()
+                await wake.wait()
                 frames = q.take()
                 if frames:
                     chunk = b"".join(b"id: %d\nevent: frame\ndata: %s\n\n" % (seq, with_dropped(f, q.dropped))
                                      for seq, f in frames)  # fmt: skip
-                else:
+                elif wake.keepalive_due:
                     chunk = b": keepalive\n\n"
+                else:
+                    continue
                 await self._write(resp, request, chunk)
+                wake.wrote()
         except _ENDED:
             pass
         finally:
+            wake.close()
             self.hub.close_stream(q)
         return resp
 
     async def _live(self, request: web.Request) -> web.StreamResponse:
         wanted = frozenset(request.query.getall("device", [])) or None
-        wake = asyncio.Event()
+        wake = _Wake(self.keepalive_s)
         p = self.hub.open_page(wanted, self.max_fps, wake.set)
         for entry in self.hub.devices():  # draw at once, then follow
             if entry.seq:  # a device whose first poll has not completed has no frame yet
@@ -324,21 +419,23 @@ class WebPage:
         resp = web.StreamResponse(headers=_SSE_HEADERS)
         try:
             await self._open_events(resp, request)
+            wake.wrote()
             while not p.closed:
                 wait = p.wait_s(self._clock())
                 if wait is None:
-                    try:
-                        await asyncio.wait_for(wake.wait(), KEEPALIVE_S)
-                    except TimeoutError:
+                    await wake.wait()
+                    if wake.keepalive_due and p.wait_s(self._clock()) is None:
                         await self._write(resp, request, b": keepalive\n\n")
-                    wake.clear()
+                        wake.wrote()
                     continue
                 if wait > 0:
                     await asyncio.sleep(wait)  # newer frames replace pending ones meanwhile
                 frames = p.take(self._clock())
                 await self._write(resp, request, b"".join(b"event: frame\ndata: %s\n\n" % f for f in frames))
+                wake.wrote()
         except _ENDED:
             pass
         finally:
+            wake.close()
             self.hub.close_page(p)
         return resp

@@ -158,6 +158,8 @@ class FrameHub:
         self._wake_pending = False
         self._streams: dict[str, set[StreamQueue]] = {}
         self._pages: set[PageQueue] = set()
+        #: stream and page clients now open (under the lock: the poller's thread reads it)
+        self._clients_open = 0
         self.dropped_total: dict[str, int] = {}
         self.inbox_dropped = 0
         if holder is not None:
@@ -168,6 +170,7 @@ class FrameHub:
     def on_snapshot(self, snap: GatewaySnapshot) -> None:
         """Note the devices polled since the last call; cheap, never blocks on clients."""
         wake: Schedule | None = None
+        keeps_past = self.history_s > 0 or self.export_s > 0
         with self._lock:
             for name, dev in snap.devices.items():
                 old = self._latest.get(name)
@@ -181,7 +184,7 @@ class FrameHub:
                     continue
                 entry = Latest(old.seq + 1 if old is not None else 1, dev, snap.counters.get(name))
                 self._latest[name] = entry
-                if self._schedule is not None:
+                if self._schedule is not None and (self._clients_open or keeps_past):
                     if len(self._inbox) >= self.inbox_capacity:
                         self._inbox.popleft()
                         self.inbox_dropped += 1
@@ -232,6 +235,7 @@ class FrameHub:
         for name in gone:  # a device a reload removed: its past goes with it
             del self._history[name]
         skip = {name: n - self.stream_capacity for name, n in Counter(n for n, _ in batch).items()}
+        newest: dict[str, tuple[Latest, bytes | None]] = {}  # what the pages get: one a device
         for name, entry in batch:
             if self.history_s > 0 or self.export_s > 0:
                 past = self._history.get(name)
@@ -241,13 +245,21 @@ class FrameHub:
             if skip[name] > 0:
                 skip[name] -= 1
                 continue
-            frame = encode_frame(frame_of(entry.snapshot), entry.seq, entry.counters)
-            for q in self._streams.get(name, ()):
-                lost = q.offer(entry.seq, frame)
-                if lost:
-                    self.dropped_total[name] = self.dropped_total.get(name, 0) + lost
-            for p in self._pages:
-                p.offer(name, frame)
+            streams = self._streams.get(name)
+            frame = None
+            if streams:
+                frame = encode_frame(frame_of(entry.snapshot), entry.seq, entry.counters)
+                for q in streams:
+                    lost = q.offer(entry.seq, frame)
+                    if lost:
+                        self.dropped_total[name] = self.dropped_total.get(name, 0) + lost
+            newest[name] = (entry, frame)
+        if self._pages:
+            for name, (entry, frame) in newest.items():
+                if frame is None:  # no stream wanted it: only a device's newest is encoded
+                    frame = encode_frame(frame_of(entry.snapshot), entry.seq, entry.counters)
+                for p in self._pages:
+                    p.offer(name, frame)
 
     def history(self, device: str) -> DeviceHistory | None:
         """What the hub keeps of ``device``'s past (server loop only), None when it keeps
@@ -265,24 +277,34 @@ class FrameHub:
     def open_stream(self, device: str, wakeup: Wakeup = _noop) -> StreamQueue:
         """A new stream client of ``device``: it gets every poll from the next one on."""
         q = StreamQueue(device, self.stream_capacity, wakeup)
-        latest = self.latest(device)
-        q.expect(1 if latest is None else latest.seq + 1)
-        self._streams.setdefault(device, set()).add(q)
+        with self._lock:
+            latest = self._latest.get(device)
+            q.expect(1 if latest is None else latest.seq + 1)
+            self._streams.setdefault(device, set()).add(q)
+            self._clients_open += 1
         return q
 
     def close_stream(self, q: StreamQueue) -> None:
-        q.closed = True
-        self._streams.get(q.device, set()).discard(q)
+        with self._lock:
+            if not q.closed and q in self._streams.get(q.device, ()):
+                self._clients_open -= 1
+            q.closed = True
+            self._streams.get(q.device, set()).discard(q)
         q._wakeup()
 
     def open_page(self, devices: frozenset[str] | None, max_fps: float, wakeup: Wakeup = _noop) -> PageQueue:
         p = PageQueue(devices, max_fps, wakeup)
-        self._pages.add(p)
+        with self._lock:
+            self._pages.add(p)
+            self._clients_open += 1
         return p
 
     def close_page(self, p: PageQueue) -> None:
-        p.closed = True
-        self._pages.discard(p)
+        with self._lock:
+            if not p.closed and p in self._pages:
+                self._clients_open -= 1
+            p.closed = True
+            self._pages.discard(p)
         p._wakeup()
 
     def close_all(self) -> None:

@@ -10,7 +10,7 @@ import json
 import os
 import shutil
 import urllib.request
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable
 from pathlib import Path
 from typing import Any
 
@@ -140,10 +140,20 @@ async def test_a_gateway_without_history_leaves_the_chart_live(browser: Any, say
         )
         assert asked == (1 if says else 0), asked
         assert await text(page, "#state") in ("up", "stale")
-        assert int(await _dataset(page, "#history", "points") or 0) == 1  # the one live frame
+
+        async def charted() -> int:
+            return int(await _dataset(page, "#history", "points") or 0)
+
+        # the live frame may come after the history's answer: wait for it, then count
+        await until_async(lambda: _at_least(charted(), 1), 10, "the live frame charted")
+        assert await charted() == 1  # the one live frame, and no other point
         assert float(await text(page, "#total-force")) == pytest.approx(1.75, abs=1e-3)
         await page.close()
     assert errors == [], errors
+
+
+async def _at_least(count: Awaitable[int], n: int) -> bool:
+    return await count >= n
 
 
 # ---------------------------------------------------------------- playback

@@ -37,7 +37,7 @@ from gateway.runtime.processor import DeviceProcessor
 from gateway.runtime.snapshot import DeviceSnapshot, GatewaySnapshot
 from gateway.runtime.summary import device_summary
 from gateway.web import FrameHub, WebPage
-from gateway.web.app import WRITE_TIMEOUT_S
+from gateway.web.app import KEEPALIVE_S, WRITE_TIMEOUT_S
 from gateway.web.hub import Latest
 from sim_device import ArrayConfig, SimArray, serve_tcp
 
@@ -140,6 +140,7 @@ async def gateway_with_page(
     *,
     max_connections: int = MAX_CONNECTIONS,
     write_timeout_s: float = WRITE_TIMEOUT_S,
+    keepalive_s: float = KEEPALIVE_S,
     rois: tuple[Roi, ...] = (),
     history_s: float = 0.0,
     export_s: float = 0.0,
@@ -156,7 +157,7 @@ async def gateway_with_page(
     def export_csv(name: str, snapshots: Sequence[DeviceSnapshot]) -> str:
         return export_record(whole[0], name, snapshots, {"source": "test export"})
 
-    page = WebPage(hub, scale_max_n=scale_max_n, write_timeout_s=write_timeout_s,
+    page = WebPage(hub, scale_max_n=scale_max_n, write_timeout_s=write_timeout_s, keepalive_s=keepalive_s,
                    device_configs=lambda: configs, export_csv=export_csv)  # fmt: skip
     server = MetricsServer(
         registry, "127.0.0.1", 0, web_config, page.install, max_connections=max_connections

@@ -79,14 +79,14 @@ def test_hub_numbers_each_device_poll_and_wakes_once_per_batch() -> None:
     hub = FrameHub(holder)
     sched = Scheduled()
     hub.attach(sched)
+    stream = hub.open_stream("a")
+    page = hub.open_page(None, 30.0)
     a, b = device("a"), device("b")
     holder.publish(gateway(a, b))
     holder.publish(gateway(a, b))  # nothing new: no frame
     a2 = device("a", t=1001.0)
     holder.publish(gateway(a2, b))
     assert len(sched.calls) == 1  # one wake for the whole batch
-    stream = hub.open_stream("a")
-    page = hub.open_page(None, 30.0)
     sched.run()
     assert seqs(stream) == [1, 2]
     latest = hub.latest("a")
@@ -142,15 +142,17 @@ def test_a_burst_longer_than_a_stream_queue_encodes_only_what_can_reach_a_client
     b0 = device("b", t=0.0)
     hub.on_snapshot(gateway(device("a", t=0.0), b0))
     sched.run()
-    assert seqs(q) == [1] and encoded == [1, 1]  # "waiting" keeps its frame 1, unread
+    # "waiting" keeps its frame 1, unread; b has no stream and no page yet: not encoded
+    assert seqs(q) == [1] and encoded == [1]
     page = hub.open_page(None, 30.0)
     for k in range(1, 11):  # the server loop is held up: 10 polls of a and 2 of b, one drain
         b = device("b", t=float(k)) if k > 8 else b0  # the same snapshot: not a new poll
         hub.on_snapshot(gateway(device("a", t=float(k)), b))
     encoded.clear()
     sched.run()
-    # a's polls 2..7 can reach no client (4 fit in a queue): not encoded, counted lost
-    assert sorted(encoded) == [2, 3, 8, 9, 10, 11]
+    # a's polls 2..7 can reach no client (4 fit in a queue): not encoded, counted lost; b
+    # has no stream, so of its polls 2 and 3 only the newest is encoded, for the page
+    assert sorted(encoded) == [3, 8, 9, 10, 11]
     assert seqs(q) == [8, 9, 10, 11] and q.dropped == 6
     assert seqs(waiting) == [8, 9, 10, 11] and waiting.dropped == 7  # and its unread frame 1
     assert hub.dropped_total == {"a": 13}
@@ -167,11 +169,80 @@ def test_a_detached_hub_keeps_the_latest_and_queues_nothing() -> None:
     sched = Scheduled()
     hub.attach(sched)
     assert sched.calls == []
+    hub.open_stream("b")
     hub.on_snapshot(gateway(device("b")))  # "a" is gone from the gateway
     assert hub.latest("a") is None and [e.snapshot.device for e in hub.devices()] == ["b"]
     hub.detach()
     hub.on_snapshot(gateway(device("b", t=3.0)))
     assert len(sched.calls) == 1
+
+
+def test_a_hub_nobody_follows_numbers_polls_but_wakes_nothing() -> None:
+    """No stream, no page, no history: a poll costs the server's loop nothing (no wake, no
+    encoding); the sequence goes on, so a client that comes later starts where it stands."""
+    hub = FrameHub()
+    sched = Scheduled()
+    hub.attach(sched)
+    for k in range(5):
+        hub.on_snapshot(gateway(device("a", t=float(k))))
+    assert sched.calls == []
+    latest = hub.latest("a")
+    assert latest is not None and latest.seq == 5
+    q = hub.open_stream("a")
+    hub.on_snapshot(gateway(device("a", t=5.0)))
+    assert len(sched.calls) == 1
+    sched.run()
+    assert seqs(q) == [6] and q.dropped == 0  # no gap: it expected 6
+    hub.close_stream(q)
+    hub.close_stream(q)  # twice: counted once
+    assert hub.clients() == (0, 0)
+    hub.on_snapshot(gateway(device("a", t=6.0)))
+    assert sched.calls == []
+    page = hub.open_page(None, 30.0)
+    hub.on_snapshot(gateway(device("a", t=7.0)))
+    assert len(sched.calls) == 1
+    hub.close_page(page)
+
+
+def test_a_hub_that_keeps_history_is_woken_with_nobody_following() -> None:
+    hub = FrameHub(history_s=10.0)
+    sched = Scheduled()
+    hub.attach(sched)
+    hub.on_snapshot(gateway(device("a", t=1000.0)))
+    hub.on_snapshot(gateway(device("a", t=1001.0)))
+    assert len(sched.calls) == 1
+    sched.run()
+    past = hub.history("a")
+    assert past is not None and len(past.points(10.0)) == 2
+
+
+def test_a_page_gets_the_newest_poll_of_a_drain_encoded_once() -> None:
+    """Five polls of a device no stream follows, one drain: the page gets the newest, the
+    only one encoded; with a stream, every poll is encoded once, and the page shares it."""
+    encoded: list[int] = []
+    real = hub_module.encode_frame
+
+    def counting(frame: object, seq: int, counters: object) -> bytes:
+        encoded.append(seq)
+        return real(frame, seq, counters)  # type: ignore[arg-type]
+
+    hub = FrameHub()
+    sched = Scheduled()
+    hub.attach(sched)
+    page = hub.open_page(None, 30.0)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(hub_module, "encode_frame", counting)
+        for k in range(5):
+            hub.on_snapshot(gateway(device("a", t=float(k))))
+        sched.run()
+        assert encoded == [5] and page.superseded == 0
+        assert [json.loads(f)["seq"] for f in page.take(0.0)] == [5]
+        q = hub.open_stream("a")
+        for k in range(5, 8):
+            hub.on_snapshot(gateway(device("a", t=float(k))))
+        sched.run()
+    assert encoded == [5, 6, 7, 8] and seqs(q) == [6, 7, 8]
+    assert [json.loads(f)["seq"] for f in page.take(1.0)] == [8]
 
 
 def test_closing_ends_every_client() -> None:
