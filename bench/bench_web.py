@@ -12,7 +12,10 @@ HTTP server (aiohttp in its own thread) serves the page stream and the frame str
    turns in ``ROUNDS`` short rounds in the same run (goal >= 0.95). The clients run in one
    other process for the whole run, standing for browsers and programs on other machines:
    pinned with the device to the device's core where there are two or more, at the lowest
-   priority (see ``_Clients``).
+   priority, and only the timed stream client decodes its frames (see ``_Clients``). The
+   server is started as ``run`` starts it for a bus polled back to back: its thread lowered
+   (``runtime.priority``). Besides the ratio of the summed rates, the quartiles of the
+   rounds' own ratios show how much the machine itself moved.
 
 Each measurement runs for ``BENCH_SECONDS`` (default 5) seconds in all.
 """
@@ -36,9 +39,10 @@ from gateway.web import FrameHub, WebPage
 
 from .bench_gateway import MEASURE_S, _array, _device_of, _end, _gateway, _sim_process, _split_cores
 
-#: the two phases alternate this many times: short rounds, so that the machine's own changes
-#: of pace (seconds long on a shared host) hit both phases alike
-ROUNDS = 10
+#: each phase's share of a round (s): the phases alternate every half second, so that the
+#: machine's own changes of pace (a second or more on a shared host) hit both alike
+SLOT_S = 0.5
+ROUNDS = max(3, round(MEASURE_S / SLOT_S))
 #: the longest line the client process may report (a round's frames: about 40 bytes each)
 REPORT_LIMIT_BYTES = 1 << 26
 #: after the clients connect, polls before the loaded phase is measured (s)
@@ -55,9 +59,9 @@ async def follow(session, url, record, counts, k, connected):
         connected.set_result(None) if not connected.done() else None
         async for line in resp.content:
             if line.startswith(b"data: "):
-                frame = json.loads(line[6:])
                 counts[k] += 1
-                if record is not None:
+                if record is not None:  # only the timed client decodes: the others count
+                    frame = json.loads(line[6:])
                     record.append((frame["seq"], time.monotonic(), frame.get("dropped", 0)))
 
 async def main():
@@ -215,8 +219,9 @@ async def bench_web() -> None:
     print(f"  poll rate, {with_clients} {statistics.mean(loaded):8.1f} polls/s  "
           f"ratio {sum(loaded) / sum(alone):.3f} (goal >= 0.95)")  # fmt: skip
     per_round = sorted(b / a for a, b in zip(alone, loaded, strict=True))
-    print(f"  per round: median {statistics.median(per_round):.3f}, "
-          f"{', '.join(f'{r:.2f}' for r in per_round)}")  # fmt: skip
+    q1, q2, q3 = statistics.quantiles(per_round, n=4) if len(per_round) > 1 else (per_round * 3)
+    print(f"  per round ({len(per_round)}): quartiles {q1:.3f} {q2:.3f} {q3:.3f}, "
+          f"range {per_round[0]:.2f}-{per_round[-1]:.2f} (the machine's own noise)")  # fmt: skip
     if ms:
         print(f"  frame latency poll->stream client: median {statistics.median(ms):.2f} ms, "
               f"p99 {_pct(ms, 0.99):.2f} ms, max {max(ms):.2f} ms over {len(ms)} frames "

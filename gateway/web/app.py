@@ -65,7 +65,7 @@ STATIC_FILES: dict[str, str] = {
 KEEPALIVE_S = 15.0
 #: polls reach the clients at most once in this (s); a frame waits at most this long, and only
 #: when polls come faster (see ``_Paced``)
-DRAIN_INTERVAL_S = 0.01
+DRAIN_INTERVAL_S = 0.002
 #: a stream's write not taken by the client within this ends the stream (a stalled reader)
 WRITE_TIMEOUT_S = 10.0
 #: the span an export gives without ``from_s`` (s before ``to_s``)
@@ -125,14 +125,31 @@ class _Wake:
         self.keepalive_due = False
         self._last_write_s = self._loop.time()
         self._timer = self._loop.call_later(keepalive_s, self._tick)
+        self._reminder: asyncio.TimerHandle | None = None
 
     def set(self) -> None:
         self._event.set()
 
+    def remind(self, delay_s: float) -> None:
+        """Be woken in ``delay_s`` at the latest (one timer: an earlier one stands)."""
+        when_s = self._loop.time() + delay_s
+        if self._reminder is not None:
+            if self._reminder.when() <= when_s:
+                return
+            self._reminder.cancel()
+        self._reminder = self._loop.call_at(when_s, self._remind_now)
+
+    def _remind_now(self) -> None:
+        self._reminder = None
+        self._event.set()
+
     def wrote(self) -> None:
-        """A write went out: the keepalive's clock starts again."""
+        """A write went out: the keepalive's clock starts again, and a reminder is spent."""
         self._last_write_s = self._loop.time()
         self.keepalive_due = False
+        if self._reminder is not None:
+            self._reminder.cancel()
+            self._reminder = None
 
     async def wait(self) -> None:
         """Until a frame is offered, the stream is closed or a keepalive is due."""
@@ -149,6 +166,8 @@ class _Wake:
 
     def close(self) -> None:
         self._timer.cancel()
+        if self._reminder is not None:
+            self._reminder.cancel()
 
 
 def _json(data: Any, status: int = 200) -> web.Response:
@@ -412,7 +431,17 @@ class WebPage:
     async def _live(self, request: web.Request) -> web.StreamResponse:
         wanted = frozenset(request.query.getall("device", [])) or None
         wake = _Wake(self.keepalive_s)
-        p = self.hub.open_page(wanted, self.max_fps, wake.set)
+
+        def offered() -> None:
+            """A frame is offered (or the page closed): wake the sender if it may send now,
+            else have it woken when it may (one timer; frames offered meanwhile replace it)."""
+            wait = p.wait_s(self._clock())
+            if p.closed or wait is None or wait <= 0.0:
+                wake.set()
+            else:
+                wake.remind(wait)
+
+        p = self.hub.open_page(wanted, self.max_fps, offered)
         for entry in self.hub.devices():  # draw at once, then follow
             if entry.seq:  # a device whose first poll has not completed has no frame yet
                 p.offer(entry.snapshot.device, encode_frame(entry.snapshot, entry.seq, entry.counters))
@@ -421,15 +450,16 @@ class WebPage:
             await self._open_events(resp, request)
             wake.wrote()
             while not p.closed:
+                await wake.wait()
                 wait = p.wait_s(self._clock())
                 if wait is None:
-                    await wake.wait()
-                    if wake.keepalive_due and p.wait_s(self._clock()) is None:
+                    if wake.keepalive_due:
                         await self._write(resp, request, b": keepalive\n\n")
                         wake.wrote()
                     continue
-                if wait > 0:
-                    await asyncio.sleep(wait)  # newer frames replace pending ones meanwhile
+                if wait > 0.0:  # woken before it may send (a keepalive's tick)
+                    wake.remind(wait)
+                    continue
                 frames = p.take(self._clock())
                 await self._write(resp, request, b"".join(b"event: frame\ndata: %s\n\n" % f for f in frames))
                 wake.wrote()

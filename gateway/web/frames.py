@@ -185,7 +185,7 @@ def frame_json(source: DeviceSnapshot | Frame, seq: int, counters: DeviceCounter
         "up": f.up,
         "error": f.error,
         "force_n": list(f.force_n),
-        "status": [int(s) for s in f.status],
+        "status": list(f.status),  # IntEnum members: ints to every JSON encoder
         "total_force_n": f.total_force_n,
         "cop_mm": None if cop is None else [cop[0], cop[1]],
         "contact_area_mm2": f.contact_area_mm2,

@@ -102,3 +102,24 @@ async def test_a_client_idle_for_the_keepalive_is_woken_once_for_it() -> None:
         assert wake.keepalive_due and loop.time() - t1 >= keepalive_s
     finally:
         wake.close()
+
+
+async def test_a_reminder_wakes_once_at_the_earliest_time_asked_and_a_write_spends_it() -> None:
+    loop = asyncio.get_running_loop()
+    wake = _Wake(keepalive_s=60.0)
+    try:
+        t0 = loop.time()
+        wake.remind(5.0)
+        wake.remind(0.05)  # earlier: it stands
+        wake.remind(3.0)  # later: the earlier one stands
+        await wake.wait()
+        woken_s = loop.time() - t0
+        assert 0.05 <= woken_s < 3.0 and not wake.keepalive_due
+        wake.remind(0.05)
+        wake.wrote()  # the frame went out: nothing left to be reminded of
+        loop.call_later(0.2, wake.set)
+        t1 = loop.time()
+        await wake.wait()
+        assert loop.time() - t1 >= 0.2  # woken by the frame, not by the spent reminder
+    finally:
+        wake.close()
