@@ -17,7 +17,7 @@ HTTP server (aiohttp in its own thread) serves the page stream and the frame str
    (``runtime.priority``). Besides the ratio of the summed rates, the quartiles of the
    rounds' own ratios show how much the machine itself moved.
 
-Each measurement runs for ``BENCH_SECONDS`` (default 5) seconds in all.
+Each phase runs for ``BENCH_SECONDS`` seconds in all, 20 s at least (see ``ROUNDS``).
 """
 
 from __future__ import annotations
@@ -42,7 +42,9 @@ from .bench_gateway import MEASURE_S, _array, _device_of, _end, _gateway, _sim_p
 #: each phase's share of a round (s): the phases alternate every half second, so that the
 #: machine's own changes of pace (a second or more on a shared host) hit both alike
 SLOT_S = 0.5
-ROUNDS = max(3, round(MEASURE_S / SLOT_S))
+#: at least 40 rounds (20 s a phase) whatever ``BENCH_SECONDS``: a round's own ratio moves by
+#: tens of per cent with the machine, so fewer rounds leave the summed ratio a few per cent off
+ROUNDS = max(40, round(MEASURE_S / SLOT_S))
 #: the longest line the client process may report (a round's frames: about 40 bytes each)
 REPORT_LIMIT_BYTES = 1 << 26
 #: after the clients connect, polls before the loaded phase is measured (s)
@@ -150,7 +152,7 @@ async def bench_web() -> None:
     all_cores = os.sched_getaffinity(0)
     cores = _split_cores(proc.pid)
     device_core = sorted(all_cores)[-1] if len(all_cores) > 1 else None
-    slot = MEASURE_S / ROUNDS
+    slot = max(MEASURE_S / ROUNDS, SLOT_S)
     try:
         # polled back to back (as below): ``run`` would lower its server's priority for such
         # a bus (``runtime.priority``), and so does this bench
