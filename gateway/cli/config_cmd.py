@@ -181,7 +181,8 @@ def _region_lines(dev: DeviceConfig, requests: int) -> list[str]:
 
 
 def _readout_lines(dev: DeviceConfig) -> list[str]:
-    """What the rails mean, and the status words read with every poll."""
+    """What the rails mean, the status words read with every poll, and the regions of interest
+    whose sums every frame carries."""
     out = []
     if dev.rails == "readings":
         out.append(
@@ -194,6 +195,14 @@ def _readout_lines(dev: DeviceConfig) -> list[str]:
         parts += [f"{len(word.codes)} codes"] if word.codes else []
         meaning = ", ".join(parts) if parts else "its value"
         out.append(f"    status word {word.name}: {word.table} {word.address} ({meaning})")
+    names = {ch.index: ch.name for ch in dev.channels}
+    for roi in dev.rois:
+        first, last = (
+            names.get(roi.channels[0], str(roi.channels[0])),
+            names.get(roi.channels[-1], str(roi.channels[-1])),
+        )
+        span = first if len(roi.channels) == 1 else f"{first} .. {last}"
+        out.append(f"    region of interest {roi.name}: {_plural(len(roi.channels), 'channel')} ({span})")
     return out
 
 

@@ -247,3 +247,13 @@ def test_replayed_snapshots_carry_each_samples_own_rois() -> None:
     assert n == 2
     assert snaps[0].rois[0].force_n == pytest.approx(3.5, abs=1e-6)
     assert snaps[1].rois[0].force_n == 0.0 and snaps[1].rois[0].cop_mm is None
+
+
+def test_check_config_lists_each_region_of_interest() -> None:
+    from gateway.cli.config_cmd import _readout_lines
+
+    lines = _readout_lines(device_4x4((HEEL, Roi("one", (7,)))))
+    assert lines == [
+        "    region of interest heel: 4 channels (ch04 .. ch09)",
+        "    region of interest one: 1 channel (ch07)",
+    ]
