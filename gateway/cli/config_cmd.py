@@ -195,13 +195,10 @@ def _readout_lines(dev: DeviceConfig) -> list[str]:
         parts += [f"{len(word.codes)} codes"] if word.codes else []
         meaning = ", ".join(parts) if parts else "its value"
         out.append(f"    status word {word.name}: {word.table} {word.address} ({meaning})")
-    names = {ch.index: ch.name for ch in dev.channels}
+    names = {ch.index: ch.name for ch in dev.channels}  # every index a region may name
     for roi in dev.rois:
-        first, last = (
-            names.get(roi.channels[0], str(roi.channels[0])),
-            names.get(roi.channels[-1], str(roi.channels[-1])),
-        )
-        span = first if len(roi.channels) == 1 else f"{first} .. {last}"
+        first, last = names[roi.channels[0]], names[roi.channels[-1]]
+        span = first if first == last else f"{first} .. {last}"
         out.append(f"    region of interest {roi.name}: {_plural(len(roi.channels), 'channel')} ({span})")
     return out
 

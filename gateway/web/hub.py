@@ -157,9 +157,7 @@ class FrameHub:
         self._schedule: Schedule | None = None
         self._wake_pending = False
         self._streams: dict[str, set[StreamQueue]] = {}
-        self._pages: set[PageQueue] = set()
-        #: stream and page clients now open (under the lock: the poller's thread reads it)
-        self._clients_open = 0
+        self._pages: set[PageQueue] = set()  # both changed under the lock: the poller reads them
         self.dropped_total: dict[str, int] = {}
         self.inbox_dropped = 0
         if holder is not None:
@@ -170,8 +168,8 @@ class FrameHub:
     def on_snapshot(self, snap: GatewaySnapshot) -> None:
         """Note the devices polled since the last call; cheap, never blocks on clients."""
         wake: Schedule | None = None
-        keeps_past = self.history_s > 0 or self.export_s > 0
         with self._lock:
+            wanted = self.keeps_past or bool(self._pages) or any(self._streams.values())
             for name, dev in snap.devices.items():
                 old = self._latest.get(name)
                 if old is not None and old.snapshot is dev:
@@ -184,7 +182,7 @@ class FrameHub:
                     continue
                 entry = Latest(old.seq + 1 if old is not None else 1, dev, snap.counters.get(name))
                 self._latest[name] = entry
-                if self._schedule is not None and (self._clients_open or keeps_past):
+                if self._schedule is not None and wanted:
                     if len(self._inbox) >= self.inbox_capacity:
                         self._inbox.popleft()
                         self.inbox_dropped += 1
@@ -196,6 +194,12 @@ class FrameHub:
                 wake = self._schedule
         if wake is not None:
             wake(self.drain)
+
+    @property
+    def keeps_past(self) -> bool:
+        """Whether the hub keeps a past of every device (``history_s`` or ``export_s`` > 0):
+        then every poll is handed over, followed or not."""
+        return self.history_s > 0 or self.export_s > 0
 
     def latest(self, device: str) -> Latest | None:
         with self._lock:
@@ -237,7 +241,7 @@ class FrameHub:
         skip = {name: n - self.stream_capacity for name, n in Counter(n for n, _ in batch).items()}
         newest: dict[str, tuple[Latest, bytes | None]] = {}  # what the pages get: one a device
         for name, entry in batch:
-            if self.history_s > 0 or self.export_s > 0:
+            if self.keeps_past:
                 past = self._history.get(name)
                 if past is None:
                     past = self._history[name] = DeviceHistory(self.history_s, self.export_s)
@@ -264,7 +268,7 @@ class FrameHub:
     def history(self, device: str) -> DeviceHistory | None:
         """What the hub keeps of ``device``'s past (server loop only), None when it keeps
         nothing (``history_s`` and ``export_s`` 0) or the device is not listed."""
-        if self.history_s <= 0 and self.export_s <= 0:
+        if not self.keeps_past:
             return None
         if self.latest(device) is None:
             self._history.pop(device, None)  # a device a reload removed
@@ -281,13 +285,10 @@ class FrameHub:
             latest = self._latest.get(device)
             q.expect(1 if latest is None else latest.seq + 1)
             self._streams.setdefault(device, set()).add(q)
-            self._clients_open += 1
         return q
 
     def close_stream(self, q: StreamQueue) -> None:
         with self._lock:
-            if not q.closed and q in self._streams.get(q.device, ()):
-                self._clients_open -= 1
             q.closed = True
             self._streams.get(q.device, set()).discard(q)
         q._wakeup()
@@ -296,13 +297,10 @@ class FrameHub:
         p = PageQueue(devices, max_fps, wakeup)
         with self._lock:
             self._pages.add(p)
-            self._clients_open += 1
         return p
 
     def close_page(self, p: PageQueue) -> None:
         with self._lock:
-            if not p.closed and p in self._pages:
-                self._clients_open -= 1
             p.closed = True
             self._pages.discard(p)
         p._wakeup()
